@@ -1,0 +1,63 @@
+/* Scene files: one libconfig file describes both sides of a run.
+ *
+ * The reader is strict, as a user editing a scene by hand needs it to be:
+ * every getter names the key and the file line when a value is missing, of
+ * the wrong type or out of range; and cm_scene_check_unknown() reports every
+ * key below a section that no getter asked for (a typo such as "dept" is an
+ * error, not silently ignored).
+ *
+ * Paths use libconfig's syntax: "dem.bed.depth", "dem.layers.[1].radius".
+ * Integers are accepted where a float is asked for (E = 50000000;). */
+#ifndef CM_SCENE_H
+#define CM_SCENE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "error.h"
+
+typedef struct cm_scene cm_scene;
+
+int cm_scene_open(const char *path, cm_scene **out, cm_error *err);
+/* For tests and generated scenes: parse text; `name` is used in messages. */
+int cm_scene_open_string(const char *text, const char *name, cm_scene **out, cm_error *err);
+void cm_scene_close(cm_scene **s);
+
+const char *cm_scene_path(const cm_scene *s);
+/* Folder of the scene file, for resolving relative paths (mesh files, beds). */
+const char *cm_scene_dir(const cm_scene *s);
+
+bool cm_scene_has(cm_scene *s, const char *path);
+
+/* Required values: a missing key is an error. Range is inclusive [lo, hi]. */
+int cm_scene_double(cm_scene *s, const char *path, double lo, double hi, double *out, cm_error *err);
+int cm_scene_int(cm_scene *s, const char *path, long lo, long hi, long *out, cm_error *err);
+int cm_scene_string(cm_scene *s, const char *path, char *buf, size_t len, cm_error *err);
+/* A fixed-length numeric array, e.g. gravity = [0.0, 0.0, -9.81]; */
+int cm_scene_doubles(cm_scene *s, const char *path, int n, double lo, double hi, double *out, cm_error *err);
+/* One of the listed words (NULL-terminated list); *out is its index. */
+int cm_scene_choice(cm_scene *s, const char *path, const char *const *choices, int *out, cm_error *err);
+
+/* Optional values: a missing key gives the default; a present one is checked. */
+int cm_scene_double_opt(cm_scene *s, const char *path, double lo, double hi, double def, double *out, cm_error *err);
+int cm_scene_int_opt(cm_scene *s, const char *path, long lo, long hi, long def, long *out, cm_error *err);
+int cm_scene_bool_opt(cm_scene *s, const char *path, bool def, bool *out, cm_error *err);
+int cm_scene_string_opt(cm_scene *s, const char *path, const char *def, char *buf, size_t len, cm_error *err);
+int cm_scene_doubles_opt(cm_scene *s, const char *path, int n, double lo, double hi, const double *def,
+                         double *out, cm_error *err);
+int cm_scene_choice_opt(cm_scene *s, const char *path, const char *const *choices, int def, int *out,
+                        cm_error *err);
+
+/* Number of elements of a list or array at path (0 when absent). */
+int cm_scene_length(cm_scene *s, const char *path);
+
+/* Marks a whole section as known without reading it (a server skipping the
+ * other server's section). */
+void cm_scene_mark_known(cm_scene *s, const char *path);
+
+/* Fails on the first key below any of the NULL-terminated `sections` that no
+ * getter read, and on any top-level section not in `sections`. Call it after
+ * all reading is done. */
+int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *err);
+
+#endif

@@ -1,0 +1,170 @@
+/* Scene-file reader: every kind of user mistake gives an error naming the key
+ * and the file line; valid files read back exactly. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "scene.h"
+#include "test.h"
+
+static const char *k_scene =
+    "run = {\n"                  /* 1 */
+    "  name = \"demo\";\n"       /* 2 */
+    "  end_time = 0.5;\n"        /* 3 */
+    "};\n"                       /* 4 */
+    "dem = {\n"                  /* 5 */
+    "  E = 50000000;\n"          /* 6: integer accepted as float */
+    "  gravity = [0.0, 0.0, -9.81];\n" /* 7 */
+    "  layers = ( { radius = 0.003; }, { radius = 0.004; } );\n" /* 8 */
+    "  verbose = true;\n"        /* 9 */
+    "  integrator = \"explicit\";\n" /* 10 */
+    "};\n";
+
+static int reads_values(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    double t, E, g[3], r1;
+    char name[32];
+    bool verbose;
+    ENSURE(cm_scene_string(s, "run.name", name, sizeof name, &err) == CM_OK);
+    ENSURE(strcmp(name, "demo") == 0);
+    ENSURE(cm_scene_double(s, "run.end_time", 0.0, 10.0, &t, &err) == CM_OK);
+    ENSURE(t == 0.5);
+    ENSURE(cm_scene_double(s, "dem.E", 1.0, 1e12, &E, &err) == CM_OK);
+    ENSURE(E == 5e7);
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -100, 100, g, &err) == CM_OK);
+    ENSURE(g[2] == -9.81 && g[0] == 0.0);
+    ENSURE(cm_scene_length(s, "dem.layers") == 2);
+    ENSURE(cm_scene_double(s, "dem.layers.[1].radius", 0, 1, &r1, &err) == CM_OK);
+    ENSURE(r1 == 0.004);
+    ENSURE(cm_scene_bool_opt(s, "dem.verbose", false, &verbose, &err) == CM_OK && verbose);
+    static const char *const kinds[] = {"rigid", "explicit", "newmark", NULL};
+    int k = -1;
+    ENSURE(cm_scene_choice(s, "dem.integrator", kinds, &k, &err) == CM_OK && k == 1);
+    double d;
+    ENSURE(cm_scene_double_opt(s, "dem.missing", 0, 1, 0.25, &d, &err) == CM_OK && d == 0.25);
+    cm_scene_close(&s);
+    ENSURE(s == NULL);
+    return 0;
+}
+
+static int missing_key_names_key_and_line(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    double v;
+    ENSURE(cm_scene_double(s, "dem.density", 0, 1e5, &v, &err) == CM_ERR_KEY);
+    /* The enclosing group starts on line 5. */
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:5") && strstr(err.msg, "dem.density"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static int out_of_range_names_key_and_line(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    double v;
+    ENSURE(cm_scene_double(s, "run.end_time", 1.0, 10.0, &v, &err) == CM_ERR_RANGE);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:3") && strstr(err.msg, "run.end_time"), "%s", err.msg);
+    double g[3];
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -5, 5, g, &err) == CM_ERR_RANGE);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:7") && strstr(err.msg, "dem.gravity[2]"), "%s", err.msg);
+    static const char *const kinds[] = {"rigid", "newmark", NULL};
+    int k;
+    ENSURE(cm_scene_choice(s, "dem.integrator", kinds, &k, &err) == CM_ERR_RANGE);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:10") && strstr(err.msg, "\"newmark\""), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static int wrong_type_is_refused(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    double v;
+    ENSURE(cm_scene_double(s, "run.name", 0, 1, &v, &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:2") && strstr(err.msg, "number"), "%s", err.msg);
+    long n;
+    ENSURE(cm_scene_int(s, "run.end_time", 0, 10, &n, &err) == CM_ERR_KEY);
+    double g2[2];
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 2, -100, 100, g2, &err) == CM_ERR_KEY);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static int unknown_key_is_refused(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    double v, g[3];
+    char name[32];
+    bool b;
+    int k;
+    static const char *const kinds[] = {"rigid", "explicit", NULL};
+    ENSURE(cm_scene_string(s, "run.name", name, sizeof name, &err) == 0);
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 1, &v, &err) == 0);
+    ENSURE(cm_scene_double(s, "dem.E", 0, 1e9, &v, &err) == 0);
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -10, 10, g, &err) == 0);
+    ENSURE(cm_scene_bool_opt(s, "dem.verbose", false, &b, &err) == 0);
+    ENSURE(cm_scene_choice(s, "dem.integrator", kinds, &k, &err) == 0);
+    ENSURE(cm_scene_double(s, "dem.layers.[0].radius", 0, 1, &v, &err) == 0);
+    /* layers.[1].radius was never read: that is the unknown key reported. */
+    static const char *const sections[] = {"run", "dem", NULL};
+    ENSURE(cm_scene_check_unknown(s, sections, &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg:8") && strstr(err.msg, "dem.layers.[1].radius"), "%s", err.msg);
+    ENSURE(cm_scene_double(s, "dem.layers.[1].radius", 0, 1, &v, &err) == 0);
+    ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s", err.msg);
+    cm_scene_close(&s);
+    /* A top-level section that no server reads is an error too. */
+    ENSURE(cm_scene_open_string("run = { a = 1; };\nwheeel = { r = 0.3; };\n", "typo.cfg", &s, &err) == 0);
+    long a;
+    ENSURE(cm_scene_int(s, "run.a", 0, 5, &a, &err) == 0);
+    static const char *const only_run[] = {"run", NULL};
+    ENSURE(cm_scene_check_unknown(s, only_run, &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "typo.cfg:2") && strstr(err.msg, "unknown section 'wheeel'"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static int syntax_error_names_line(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string("a = 1;\nb = ;\n", "bad.cfg", &s, &err) == CM_ERR_PARSE);
+    ENSURE(s == NULL);
+    ENSURE_MSG(strstr(err.msg, "bad.cfg:2"), "%s", err.msg);
+    ENSURE(cm_scene_open("/nonexistent/scene.cfg", &s, &err) == CM_ERR_IO);
+    ENSURE_MSG(strstr(err.msg, "/nonexistent/scene.cfg"), "%s", err.msg);
+    return 0;
+}
+
+static int non_finite_refused(void)
+{
+    /* libconfig has no NaN literal; an overflowing literal becomes inf. */
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string("x = 1e999;\n", "inf.cfg", &s, &err) == CM_OK);
+    double v;
+    ENSURE(cm_scene_double(s, "x", -1e300, 1e300, &v, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "inf.cfg:1"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"reads_values", reads_values},
+    {"missing_key_names_key_and_line", missing_key_names_key_and_line},
+    {"out_of_range_names_key_and_line", out_of_range_names_key_and_line},
+    {"wrong_type_is_refused", wrong_type_is_refused},
+    {"unknown_key_is_refused", unknown_key_is_refused},
+    {"syntax_error_names_line", syntax_error_names_line},
+    {"non_finite_refused", non_finite_refused},
+};
+
+int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -1,0 +1,143 @@
+/* Results files: one HDF5 file per server, with an XDMF 3 file beside it so
+ * that ParaView opens the whole run as a time series, and h5py reads the
+ * same data directly.
+ *
+ * Layout of <name>.h5 (all datasets plain little-endian types: doubles as
+ * IEEE F64LE, ints as I32LE; arrays of n rows by ncomp columns in row-major
+ * order, a 1-D array of length n when ncomp == 1):
+ *   /mesh/...             static datasets written once (cm_h5_write_*)
+ *   /steps/000123/        one group per snapshot, attributes time (F64) and
+ *                         step (I64); datasets written by cm_h5_step_*
+ *   /series               a table appended one row at a time (cm_h5_series_*):
+ *                         1-D, chunked and unlimited, of a compound type with
+ *                         one F64LE field per named column; h5py:
+ *                         f["series"]["KE"] is the KE column as an array
+ *   /xdmf/vertex_ids      0..N-1 (Polyvertex files only), the particles'
+ *                         explicit connectivity, so both ParaView readers
+ *                         ("Xdmf Reader" and "Xdmf3 Reader") show the points
+ *
+ * Durability: cm_h5_step_end and cm_h5_series_append flush the file
+ * (H5Fflush) before returning, and cm_h5_step_end then rewrites <name>.xmf
+ * atomically (temporary file, fsync, rename). A process killed afterwards
+ * leaves a file that HDF5 opens, with every completed step and every
+ * appended row. H5Fflush hands data to the operating system; it does not
+ * fsync the .h5, so a power cut may lose the most recent steps.
+ *
+ * The XDMF refers to datasets as "<basename of the .h5>:/steps/...", so the
+ * .h5 / .xmf pair can be moved together to another folder.
+ *
+ * Not thread-safe (Debian's serial HDF5 is not): call from one thread.
+ * cm_h5_create turns off HDF5's automatic printing of its error stack for
+ * the whole process; failures come back as a cm_error naming the file and
+ * dataset, with HDF5's innermost reason appended. */
+#ifndef CM_H5IO_H
+#define CM_H5IO_H
+
+#include <stddef.h>
+
+#include "error.h"
+
+typedef struct cm_h5 cm_h5;
+typedef struct cm_h5_series cm_h5_series;
+
+/* What the XDMF file describes. */
+typedef enum cm_h5_xdmf {
+    CM_H5_XDMF_NONE = 0,    /* HDF5 only, no .xmf file */
+    CM_H5_XDMF_POLYVERTEX,  /* particles: one vertex cell per point */
+    CM_H5_XDMF_TETRAHEDRON  /* linear tetrahedra, fixed connectivity */
+} cm_h5_xdmf;
+
+/* Where a step dataset lives in the XDMF grid. */
+typedef enum cm_h5_center {
+    CM_H5_UNLISTED = 0, /* stored in HDF5 only, not listed in the XDMF */
+    CM_H5_NODE,         /* one row per point  (XDMF Center="Node") */
+    CM_H5_CELL          /* one row per tetrahedron (XDMF Center="Cell") */
+} cm_h5_center;
+
+typedef struct cm_h5_def {
+    /* Kind of XDMF grid; CM_H5_XDMF_NONE writes no .xmf. */
+    cm_h5_xdmf xdmf;
+    /* Name of the temporal collection shown in ParaView. Default "grid". */
+    const char *grid_name;
+    /* Point coordinates, n x 3 doubles [m]. Either a step dataset name
+     * ("position": written each step, e.g. grain centres or the deformed
+     * mesh) or an absolute path to a static dataset ("/mesh/points0": the
+     * reference mesh; then write the displacement as a CM_H5_NODE vector and
+     * apply ParaView's "Warp By Vector"). Default "position". */
+    const char *geometry;
+    /* Tetrahedra only: absolute path of the static int m x 4 dataset of
+     * 0-based point indices, written with cm_h5_write_ints before the first
+     * cm_h5_step_end. Default "/mesh/connectivity". */
+    const char *connectivity;
+} cm_h5_def;
+
+cm_h5_def cm_h5_default_def(void);
+
+/* ---- File --------------------------------------------------------------- */
+
+/* Creates (truncates) the results file `path`; with def->xdmf set, the XDMF
+ * file is `path` with its .h5/.hdf5 suffix replaced by .xmf (cm_h5_xdmf_path).
+ * def may be NULL (defaults: no XDMF). */
+int cm_h5_create(const char *path, const cm_h5_def *def, cm_h5 **out, cm_error *err);
+
+/* Closes the file and every series of it, sets *f to NULL (no-op on NULL).
+ * A step begun and not ended stays in the HDF5 file but not in the XDMF. */
+int cm_h5_close(cm_h5 **f, cm_error *err);
+
+/* Flushes everything written so far to the operating system. */
+int cm_h5_flush(cm_h5 *f, cm_error *err);
+
+const char *cm_h5_path(const cm_h5 *f);
+const char *cm_h5_xdmf_path(const cm_h5 *f); /* NULL without XDMF */
+
+/* ---- Static datasets and attributes ------------------------------------- */
+
+/* Writes a new dataset at absolute `path` ("/mesh/points0"), creating the
+ * groups above it: n rows of ncomp values (1-D when ncomp == 1). Path
+ * components use only letters, digits and "_.-+". */
+int cm_h5_write_doubles(cm_h5 *f, const char *path, const double *data, size_t n, int ncomp, cm_error *err);
+int cm_h5_write_ints(cm_h5 *f, const char *path, const int *data, size_t n, int ncomp, cm_error *err);
+
+/* Sets (or replaces) a scalar attribute on an existing group or dataset
+ * ("/" for the file): provenance such as the scene text or units. Strings
+ * are stored as variable-length UTF-8 (h5py returns str). */
+int cm_h5_attr_double(cm_h5 *f, const char *object, const char *name, double value, cm_error *err);
+int cm_h5_attr_string(cm_h5 *f, const char *object, const char *name, const char *value, cm_error *err);
+
+/* ---- Snapshots ---------------------------------------------------------- */
+
+/* Starts group /steps/<step, 6+ digits> with attributes time [s] and step.
+ * Steps must increase from one snapshot to the next. */
+int cm_h5_step_begin(cm_h5 *f, long step, double time, cm_error *err);
+
+/* Writes dataset `name` (no '/') in the current step: n rows of ncomp
+ * values. A dataset listed in the XDMF (center NODE or CELL) has ncomp 1
+ * (Scalar), 3 (Vector), 6 (Tensor6, in XDMF's order xx, xy, xz, yy, yz, zz:
+ * not Voigt order) or 9 (Tensor, row-major), and as many rows as points or
+ * cells. The geometry dataset (def.geometry) is written like any other. */
+int cm_h5_step_doubles(cm_h5 *f, const char *name, cm_h5_center center, const double *data, size_t n,
+                       int ncomp, cm_error *err);
+int cm_h5_step_ints(cm_h5 *f, const char *name, cm_h5_center center, const int *data, size_t n, int ncomp,
+                    cm_error *err);
+
+/* Ends the step: checks it against the XDMF grid (geometry present, row
+ * counts), flushes the HDF5 file and rewrites the XDMF atomically. */
+int cm_h5_step_end(cm_h5 *f, cm_error *err);
+
+/* ---- Time series -------------------------------------------------------- */
+
+/* Creates an empty table at absolute `path` ("/series") with ncols named
+ * double columns (names: letters, digits, "_.-+", unique). With csv_path
+ * non-NULL, every row is also appended to that CSV file (header of column
+ * names, values as %.17g). The series belongs to f: it stays valid until
+ * cm_h5_close, which closes it. */
+int cm_h5_series_create(cm_h5 *f, const char *path, const char *const *columns, int ncols, const char *csv_path,
+                        cm_h5_series **out, cm_error *err);
+
+/* Appends one row of ncols values, flushes the HDF5 file, then the CSV. */
+int cm_h5_series_append(cm_h5_series *s, const double *row, cm_error *err);
+
+/* Rows appended so far. */
+long cm_h5_series_rows(const cm_h5_series *s);
+
+#endif

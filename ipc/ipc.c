@@ -1,0 +1,884 @@
+/* ipc: shared-memory lockstep exchange between the DEM and FEM servers.
+ * See ipc.h for the interface and PROTOCOL.md for the wire format. */
+#define _GNU_SOURCE /* sem_clockwait */
+#include "ipc.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "segment.h"
+
+struct ipc_channel {
+    ipc_role role, peer;
+    char name[256];
+    ipc_segment_header *hdr;
+    unsigned char *base; /* == (unsigned char *)hdr */
+    size_t size;
+    int linked;          /* the name still exists and we created it */
+    /* Trusted copies of what the header said when we checked it. */
+    uint32_t n_nodes, n_tris, slots, flags;
+    ipc_layout lay;
+    double dem_dt;
+    uint32_t exchange_every;
+    /* Sequence numbers: next frame to send and to receive. */
+    uint64_t send_seq, recv_seq;
+    int send_open, recv_open; /* a begin/recv without its commit/release */
+    /* Waiting policy. */
+    double stall_timeout, connect_timeout, spin_s;
+    volatile sig_atomic_t *stop_flag;
+    /* Heartbeat thread. */
+    pthread_t heartbeat;
+    int heartbeat_running;
+    _Atomic int heartbeat_stop;
+    ipc_stats stats;
+    char err[512];
+};
+
+/* ---- small helpers -------------------------------------------------------- */
+
+static uint64_t now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+static double now_s(void) { return 1e-9 * (double)now_ns(); }
+
+static inline void cpu_relax(void)
+{
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#endif
+}
+
+static uint64_t align_up(uint64_t x, uint64_t a) { return (x + a - 1) / a * a; }
+
+static int set_err(ipc_channel *ch, int code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static int set_err(ipc_channel *ch, int code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(ch->err, sizeof ch->err, fmt, ap);
+    va_end(ap);
+    return code;
+}
+
+const char *ipc_role_name(ipc_role role)
+{
+    return role == IPC_ROLE_FEM ? "fem" : role == IPC_ROLE_DEM ? "dem" : "?";
+}
+
+const char *ipc_status_name(int status)
+{
+    switch (status) {
+    case IPC_OK: return "ok";
+    case IPC_ERR_SYS: return "system error";
+    case IPC_ERR_ARG: return "bad argument";
+    case IPC_ERR_STALE: return "stale segment";
+    case IPC_ERR_VERSION: return "protocol version mismatch";
+    case IPC_ERR_SIZE: return "size mismatch";
+    case IPC_ERR_MISMATCH: return "handshake refused";
+    case IPC_ERR_PROTOCOL: return "protocol violation";
+    case IPC_ERR_PEER_DEAD: return "peer dead";
+    case IPC_ERR_PEER_FAILED: return "peer failed";
+    case IPC_ERR_TIMEOUT: return "timeout";
+    case IPC_ERR_INTERRUPTED: return "interrupted";
+    default: return "unknown status";
+    }
+}
+
+const char *ipc_error(const ipc_channel *ch) { return ch ? ch->err : "no channel"; }
+
+ipc_stats ipc_get_stats(const ipc_channel *ch) { return ch->stats; }
+
+uint64_t ipc_checksum(const void *data, size_t len)
+{
+    /* FNV-1a over 64-bit words (8x faster than bytewise), then the tail bytes. */
+    const unsigned char *p = data;
+    uint64_t h = 0xcbf29ce484222325ull;
+    size_t i = 0;
+    for (; i + 8 <= len; i += 8) {
+        uint64_t w;
+        memcpy(&w, p + i, 8);
+        h = (h ^ w) * 0x100000001b3ull;
+    }
+    for (; i < len; i++)
+        h = (h ^ p[i]) * 0x100000001b3ull;
+    return h;
+}
+
+int ipc_name_valid(const char *name)
+{
+    if (!name || name[0] != '/')
+        return 0;
+    size_t n = strlen(name);
+    if (n < 2 || n > 201)
+        return 0;
+    for (size_t i = 1; i < n; i++) {
+        char c = name[i];
+        int ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
+                 c == '_' || c == '-';
+        if (!ok)
+            return 0;
+    }
+    return 1;
+}
+
+ipc_create_def ipc_default_create_def(void)
+{
+    ipc_create_def d;
+    memset(&d, 0, sizeof d);
+    d.ring_slots = 2;
+    d.connect_timeout = 60.0;
+    d.stall_timeout = 1.0;
+    d.spin_us = 50.0;
+    return d;
+}
+
+ipc_attach_def ipc_default_attach_def(void)
+{
+    ipc_attach_def d;
+    memset(&d, 0, sizeof d);
+    d.exchange_every = 1;
+    d.connect_timeout = 60.0;
+    d.stall_timeout = 1.0;
+    d.spin_us = 50.0;
+    return d;
+}
+
+int ipc_layout_compute(uint32_t n_nodes, uint32_t n_tris, uint32_t slots, ipc_layout *lay)
+{
+    if (n_nodes < 1 || n_nodes > IPC_MAX_NODES || n_tris < 1 || n_tris > IPC_MAX_TRIS || slots < 1 || slots > 16)
+        return -1;
+    memset(lay, 0, sizeof *lay);
+    uint64_t off = align_up(sizeof(ipc_segment_header), IPC_PAGE);
+    lay->nodes_offset = off;
+    off = align_up(off + 3ull * n_nodes * sizeof(double), IPC_ALIGN);
+    lay->tris_offset = off;
+    off = align_up(off + 3ull * n_tris * sizeof(uint32_t), IPC_PAGE);
+    lay->payload_len[IPC_ROLE_FEM] = 3ull * n_nodes; /* forces */
+    lay->payload_len[IPC_ROLE_DEM] = 6ull * n_nodes; /* positions, velocities */
+    for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++) {
+        lay->slot_size[r] = align_up(sizeof(ipc_frame_head) + lay->payload_len[r] * sizeof(double), IPC_ALIGN);
+        lay->ring_offset[r] = off;
+        off = align_up(off + lay->slot_size[r] * slots, IPC_PAGE);
+    }
+    lay->segment_size = off;
+    return 0;
+}
+
+/* ---- heartbeat and liveness ---------------------------------------------- */
+
+static void *heartbeat_main(void *arg)
+{
+    ipc_channel *ch = arg;
+    while (!atomic_load(&ch->heartbeat_stop)) {
+        atomic_store(&ch->hdr->heartbeat_ns[ch->role], now_ns());
+        struct timespec ts = {0, 50 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    return NULL;
+}
+
+static int start_heartbeat(ipc_channel *ch)
+{
+    atomic_store(&ch->hdr->heartbeat_ns[ch->role], now_ns());
+    if (pthread_create(&ch->heartbeat, NULL, heartbeat_main, ch) != 0)
+        return set_err(ch, IPC_ERR_SYS, "cannot start heartbeat thread: %s", strerror(errno));
+    ch->heartbeat_running = 1;
+    return IPC_OK;
+}
+
+static void record_failure(ipc_channel *ch, const char *reason)
+{
+    int32_t none = 0;
+    /* The first failure wins: its reason is the one both sides print. */
+    if (atomic_compare_exchange_strong(&ch->hdr->failed_role, &none, (int32_t)ch->role))
+    {
+        /* Truncation is fine: the reason is for people. */
+        size_t n = strnlen(reason, IPC_REASON_LEN - 1);
+        memcpy(ch->hdr->fail_reason, reason, n);
+        ch->hdr->fail_reason[n] = '\0';
+    }
+    atomic_store(&ch->hdr->state, IPC_STATE_FAILED);
+}
+
+/* A process that has exited but is not yet reaped by its parent (a zombie)
+ * still answers kill(pid, 0): look at its state in /proc as well, so that a
+ * killed peer is noticed at once rather than when its heartbeat goes stale. */
+static int process_alive(int32_t pid)
+{
+    if (kill(pid, 0) != 0 && errno == ESRCH)
+        return 0;
+    char path[64], buf[256];
+    snprintf(path, sizeof path, "/proc/%d/stat", (int)pid);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return 1; /* no /proc: rely on the heartbeat */
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    const char *paren = strrchr(buf, ')'); /* "pid (comm) S ..." */
+    return !(paren && paren[1] == ' ' && (paren[2] == 'Z' || paren[2] == 'X'));
+}
+
+/* Called whenever a wait times out: is the peer still there? */
+static int check_peer(ipc_channel *ch, const char *waiting_for)
+{
+    ipc_segment_header *h = ch->hdr;
+    const char *peer = ipc_role_name(ch->peer);
+    if (ch->stop_flag && *ch->stop_flag)
+        return set_err(ch, IPC_ERR_INTERRUPTED, "interrupted while waiting for %s from %s", waiting_for, peer);
+    uint32_t state = atomic_load(&h->state);
+    if (state == IPC_STATE_FAILED) {
+        int32_t who = atomic_load(&h->failed_role);
+        char reason[IPC_REASON_LEN];
+        memcpy(reason, h->fail_reason, sizeof reason);
+        reason[IPC_REASON_LEN - 1] = '\0';
+        if (who != (int32_t)ch->role)
+            return set_err(ch, IPC_ERR_PEER_FAILED, "peer %s failed: %s", peer, reason);
+    }
+    if (state == IPC_STATE_FINISHED)
+        return set_err(ch, IPC_ERR_PROTOCOL, "peer %s ended the run while we waited for %s", peer, waiting_for);
+    int32_t pid = atomic_load(&h->pid[ch->peer]);
+    if (pid > 0) {
+        if (!process_alive(pid))
+            return set_err(ch, IPC_ERR_PEER_DEAD, "peer %s (pid %d) died while we waited for %s", peer, (int)pid,
+                           waiting_for);
+        uint64_t beat = atomic_load(&h->heartbeat_ns[ch->peer]);
+        uint64_t now = now_ns();
+        if (now > beat && (double)(now - beat) * 1e-9 > ch->stall_timeout)
+            return set_err(ch, IPC_ERR_PEER_DEAD,
+                           "peer %s (pid %d) stopped answering (no heartbeat for %.1f s) while we waited for %s",
+                           peer, (int)pid, (double)(now - beat) * 1e-9, waiting_for);
+    }
+    return IPC_OK;
+}
+
+/* Waits for a semaphore: spin briefly (a reply often comes within
+ * microseconds), then sleep in 20 ms slices, checking the peer between them.
+ * deadline_s > 0 bounds the whole wait (handshake); 0 waits as long as the
+ * peer lives. */
+static int wait_sem(ipc_channel *ch, sem_t *sem, double deadline_s, const char *what, double *waited)
+{
+    double t0 = now_s();
+    int rc = IPC_OK;
+    if (ch->spin_s > 0) {
+        while (now_s() - t0 < ch->spin_s) {
+            if (sem_trywait(sem) == 0)
+                goto done;
+            cpu_relax();
+        }
+    }
+    for (;;) {
+        struct timespec ts;
+        clock_gettime(CLOCK_MONOTONIC, &ts);
+        ts.tv_nsec += 20 * 1000 * 1000;
+        if (ts.tv_nsec >= 1000000000) {
+            ts.tv_sec += 1;
+            ts.tv_nsec -= 1000000000;
+        }
+        if (sem_clockwait(sem, CLOCK_MONOTONIC, &ts) == 0)
+            break;
+        if (errno != ETIMEDOUT && errno != EINTR) {
+            rc = set_err(ch, IPC_ERR_SYS, "waiting for %s: %s", what, strerror(errno));
+            break;
+        }
+        rc = check_peer(ch, what);
+        if (rc)
+            break;
+        if (deadline_s > 0 && now_s() - t0 > deadline_s) {
+            rc = set_err(ch, IPC_ERR_TIMEOUT, "no %s from peer %s within %.1f s", what, ipc_role_name(ch->peer),
+                         deadline_s);
+            break;
+        }
+    }
+done:
+    if (waited)
+        *waited += now_s() - t0;
+    return rc;
+}
+
+/* ---- creation (FEM side) -------------------------------------------------- */
+
+static ipc_channel *channel_new(ipc_role role, const char *name)
+{
+    ipc_channel *ch = calloc(1, sizeof *ch);
+    if (!ch)
+        return NULL;
+    ch->role = role;
+    ch->peer = role == IPC_ROLE_FEM ? IPC_ROLE_DEM : IPC_ROLE_FEM;
+    snprintf(ch->name, sizeof ch->name, "%s", name);
+    return ch;
+}
+
+static void channel_free(ipc_channel *ch)
+{
+    if (ch->heartbeat_running) {
+        atomic_store(&ch->heartbeat_stop, 1);
+        pthread_join(ch->heartbeat, NULL);
+    }
+    if (ch->hdr)
+        munmap(ch->base, ch->size);
+    if (ch->linked)
+        shm_unlink(ch->name);
+    free(ch);
+}
+
+static void copy_err(char *err, size_t errlen, const char *msg)
+{
+    if (err && errlen)
+        snprintf(err, errlen, "%s", msg);
+}
+
+static double positive_or(double v, double def) { return v > 0 ? v : def; }
+
+int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, char *err, size_t errlen)
+{
+    *out = NULL;
+    if (!ipc_name_valid(name)) {
+        copy_err(err, errlen, "invalid shared-memory name (want \"/\" then letters, digits, '.', '_', '-')");
+        return IPC_ERR_ARG;
+    }
+    ipc_layout lay;
+    uint32_t slots = def->ring_slots ? def->ring_slots : 2;
+    if (ipc_layout_compute(def->n_nodes, def->n_tris, slots, &lay) != 0) {
+        char m[512];
+        snprintf(m, sizeof m, "%s: surface of %u nodes, %u triangles, %u slots is out of range", name, def->n_nodes,
+                 def->n_tris, slots);
+        copy_err(err, errlen, m);
+        return IPC_ERR_ARG;
+    }
+    ipc_channel *ch = channel_new(IPC_ROLE_FEM, name);
+    if (!ch) {
+        copy_err(err, errlen, "out of memory");
+        return IPC_ERR_SYS;
+    }
+    int rc = IPC_OK;
+    int fd = shm_open(name, O_CREAT | O_EXCL | O_RDWR, 0600);
+    if (fd < 0) {
+        if (errno == EEXIST)
+            rc = set_err(ch, IPC_ERR_STALE,
+                         "shared-memory segment %s already exists (left by another run?): refusing to reuse it; "
+                         "remove /dev/shm%s or choose another name",
+                         name, name);
+        else
+            rc = set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", name, strerror(errno));
+        goto fail;
+    }
+    ch->linked = 1;
+    if (ftruncate(fd, (off_t)lay.segment_size) != 0) {
+        rc = set_err(ch, IPC_ERR_SYS, "sizing %s to %llu bytes: %s", name, (unsigned long long)lay.segment_size,
+                     strerror(errno));
+        close(fd);
+        goto fail;
+    }
+    void *p = mmap(NULL, lay.segment_size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    close(fd);
+    if (p == MAP_FAILED) {
+        rc = set_err(ch, IPC_ERR_SYS, "mmap %s: %s", name, strerror(errno));
+        goto fail;
+    }
+    ch->base = p;
+    ch->hdr = p;
+    ch->size = lay.segment_size;
+    ch->lay = lay;
+    ch->n_nodes = def->n_nodes;
+    ch->n_tris = def->n_tris;
+    ch->slots = slots;
+    ch->flags = def->checksum ? IPC_SEG_CHECKSUM : 0;
+    ch->stall_timeout = positive_or(def->stall_timeout, 1.0);
+    ch->connect_timeout = positive_or(def->connect_timeout, 60.0);
+    ch->spin_s = def->spin_us < 0 ? 0 : 1e-6 * positive_or(def->spin_us, 50.0);
+    ch->stop_flag = def->stop_flag;
+
+    ipc_segment_header *h = ch->hdr; /* ftruncate zero-filled it */
+    h->version = def->version ? def->version : IPC_VERSION;
+    h->header_size = sizeof *h;
+    h->segment_size = lay.segment_size;
+    atomic_store(&h->state, IPC_STATE_STARTING);
+    h->n_nodes = def->n_nodes;
+    h->n_tris = def->n_tris;
+    h->ring_slots = slots;
+    h->flags = ch->flags;
+    h->nodes_offset = lay.nodes_offset;
+    h->tris_offset = lay.tris_offset;
+    for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++) {
+        h->ring_offset[r] = lay.ring_offset[r];
+        h->slot_size[r] = lay.slot_size[r];
+        h->payload_len[r] = lay.payload_len[r];
+    }
+    h->fem_exchange_dt = def->exchange_dt;
+    int sem_ok = sem_init(&h->sem_hello, 1, 0) == 0 && sem_init(&h->sem_ack, 1, 0) == 0;
+    for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++)
+        sem_ok = sem_ok && sem_init(&h->sem_full[r], 1, 0) == 0 && sem_init(&h->sem_empty[r], 1, slots) == 0;
+    if (!sem_ok) {
+        rc = set_err(ch, IPC_ERR_SYS, "sem_init in %s: %s", name, strerror(errno));
+        goto fail;
+    }
+    atomic_store(&h->pid[IPC_ROLE_FEM], (int32_t)getpid());
+    rc = start_heartbeat(ch);
+    if (rc)
+        goto fail;
+    /* Publish last: an attacher that sees the magic sees a complete header. */
+    atomic_store_explicit(&h->magic, IPC_MAGIC, memory_order_release);
+    *out = ch;
+    return IPC_OK;
+fail:
+    copy_err(err, errlen, ch->err);
+    channel_free(ch);
+    return rc;
+}
+
+int ipc_accept(ipc_channel *ch)
+{
+    if (ch->role != IPC_ROLE_FEM)
+        return set_err(ch, IPC_ERR_ARG, "ipc_accept is for the FEM side");
+    ipc_segment_header *h = ch->hdr;
+    atomic_store_explicit(&h->surface_ready, 1, memory_order_release);
+    int rc = wait_sem(ch, &h->sem_hello, ch->connect_timeout, "the DEM's hello", NULL);
+    /* The DEM attached (or never will): nobody else needs the name. */
+    if (ch->linked) {
+        shm_unlink(ch->name);
+        ch->linked = 0;
+    }
+    if (rc) {
+        if (rc == IPC_ERR_TIMEOUT)
+            set_err(ch, rc, "no DEM peer attached to %s within %.1f s", ch->name, ch->connect_timeout);
+        return rc;
+    }
+    char reason[IPC_REASON_LEN] = "";
+    uint32_t dem_version = h->dem_version;
+    double dem_dt = h->dem_dt;
+    uint32_t every = h->dem_exchange_every;
+    uint32_t my_version = h->version;
+    if (dem_version != my_version) {
+        snprintf(reason, sizeof reason, "protocol version mismatch: FEM speaks %u, DEM speaks %u", my_version,
+                 dem_version);
+        rc = IPC_ERR_VERSION;
+    } else if (!(dem_dt > 0 && isfinite(dem_dt)) || every < 1) {
+        snprintf(reason, sizeof reason, "DEM announced an invalid time step %g s x %u", dem_dt, every);
+        rc = IPC_ERR_MISMATCH;
+    } else if (h->fem_exchange_dt > 0) {
+        double dem_interval = dem_dt * every;
+        if (fabs(dem_interval - h->fem_exchange_dt) > 1e-9 * h->fem_exchange_dt) {
+            snprintf(reason, sizeof reason,
+                     "time step mismatch: DEM exchanges every %u x %g s = %g s, FEM expects %g s", every, dem_dt,
+                     dem_interval, h->fem_exchange_dt);
+            rc = IPC_ERR_MISMATCH;
+        }
+    }
+    if (rc) {
+        record_failure(ch, reason);
+        sem_post(&h->sem_ack);
+        return set_err(ch, rc, "refused the DEM peer: %s", reason);
+    }
+    ch->dem_dt = dem_dt;
+    ch->exchange_every = every;
+    atomic_store(&h->state, IPC_STATE_RUNNING);
+    sem_post(&h->sem_ack);
+    return IPC_OK;
+}
+
+/* ---- attaching (DEM side) ------------------------------------------------- */
+
+static int check_header_fields(ipc_channel *ch, size_t file_size, uint32_t my_version, uint32_t expect_nodes);
+
+/* Reads and checks the header against the layout its counts imply. A refusal
+ * is written into the stable prefix too, so the creator hears why at once. */
+static int check_header(ipc_channel *ch, size_t file_size, uint32_t my_version, uint32_t expect_nodes)
+{
+    int rc = check_header_fields(ch, file_size, my_version, expect_nodes);
+    if (rc && atomic_load(&ch->hdr->state) != IPC_STATE_FAILED)
+        record_failure(ch, ch->err);
+    return rc;
+}
+
+/* Every value used later is copied into ch first (never re-read). */
+static int check_header_fields(ipc_channel *ch, size_t file_size, uint32_t my_version, uint32_t expect_nodes)
+{
+    ipc_segment_header *h = ch->hdr;
+    uint32_t version = h->version;
+    if (version != my_version) {
+        char reason[IPC_REASON_LEN];
+        snprintf(reason, sizeof reason, "protocol version mismatch: segment (FEM) is version %u, DEM speaks %u",
+                 version, my_version);
+        record_failure(ch, reason);
+        return set_err(ch, IPC_ERR_VERSION, "%s: %s", ch->name, reason);
+    }
+    if (h->header_size != sizeof *h || h->segment_size != file_size)
+        return set_err(ch, IPC_ERR_SIZE,
+                       "%s: size mismatch: header says %u-byte header and %llu-byte segment, expected %zu and %zu",
+                       ch->name, h->header_size, (unsigned long long)h->segment_size, sizeof *h, file_size);
+    uint32_t n = h->n_nodes, m = h->n_tris, slots = h->ring_slots;
+    ipc_layout lay;
+    if (ipc_layout_compute(n, m, slots, &lay) != 0)
+        return set_err(ch, IPC_ERR_SIZE, "%s: size mismatch: counts out of range (%u nodes, %u triangles, %u slots)",
+                       ch->name, n, m, slots);
+    int same = lay.segment_size == file_size && lay.nodes_offset == h->nodes_offset &&
+               lay.tris_offset == h->tris_offset;
+    for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++)
+        same = same && lay.ring_offset[r] == h->ring_offset[r] && lay.slot_size[r] == h->slot_size[r] &&
+               lay.payload_len[r] == h->payload_len[r];
+    if (!same)
+        return set_err(ch, IPC_ERR_SIZE,
+                       "%s: size mismatch: offsets in the header do not match %u nodes, %u triangles, %u slots",
+                       ch->name, n, m, slots);
+    if (expect_nodes && expect_nodes != n) {
+        char reason[IPC_REASON_LEN];
+        snprintf(reason, sizeof reason, "size mismatch: FEM publishes %u interface nodes, DEM expects %u", n,
+                 expect_nodes);
+        record_failure(ch, reason);
+        return set_err(ch, IPC_ERR_SIZE, "%s: %s", ch->name, reason);
+    }
+    ch->n_nodes = n;
+    ch->n_tris = m;
+    ch->slots = slots;
+    ch->flags = h->flags;
+    ch->lay = lay;
+    return IPC_OK;
+}
+
+static int check_surface(ipc_channel *ch)
+{
+    const double *x = (const double *)(ch->base + ch->lay.nodes_offset);
+    const uint32_t *t = (const uint32_t *)(ch->base + ch->lay.tris_offset);
+    for (uint64_t i = 0; i < 3ull * ch->n_nodes; i++)
+        if (!isfinite(x[i]))
+            return set_err(ch, IPC_ERR_PROTOCOL, "%s: interface node %llu has a non-finite coordinate", ch->name,
+                           (unsigned long long)(i / 3));
+    for (uint64_t k = 0; k < ch->n_tris; k++) {
+        uint32_t a = t[3 * k], b = t[3 * k + 1], c = t[3 * k + 2];
+        if (a >= ch->n_nodes || b >= ch->n_nodes || c >= ch->n_nodes || a == b || b == c || a == c)
+            return set_err(ch, IPC_ERR_PROTOCOL,
+                           "%s: interface triangle %llu has invalid node indices (%u, %u, %u) for %u nodes",
+                           ch->name, (unsigned long long)k, a, b, c, ch->n_nodes);
+    }
+    return IPC_OK;
+}
+
+int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, char *err, size_t errlen)
+{
+    *out = NULL;
+    if (!ipc_name_valid(name)) {
+        copy_err(err, errlen, "invalid shared-memory name (want \"/\" then letters, digits, '.', '_', '-')");
+        return IPC_ERR_ARG;
+    }
+    if (!(def->dt > 0 && isfinite(def->dt)) || def->exchange_every < 1) {
+        copy_err(err, errlen, "ipc_attach: dt must be > 0 and exchange_every >= 1");
+        return IPC_ERR_ARG;
+    }
+    ipc_channel *ch = channel_new(IPC_ROLE_DEM, name);
+    if (!ch) {
+        copy_err(err, errlen, "out of memory");
+        return IPC_ERR_SYS;
+    }
+    ch->stall_timeout = positive_or(def->stall_timeout, 1.0);
+    ch->connect_timeout = positive_or(def->connect_timeout, 60.0);
+    ch->spin_s = def->spin_us < 0 ? 0 : 1e-6 * positive_or(def->spin_us, 50.0);
+    ch->stop_flag = def->stop_flag;
+    uint32_t my_version = def->version ? def->version : IPC_VERSION;
+    double t0 = now_s();
+    int rc = IPC_OK;
+
+    /* 1. Wait for the FEM side to create the segment (either may start first). */
+    int fd;
+    for (;;) {
+        fd = shm_open(name, O_RDWR, 0);
+        if (fd >= 0)
+            break;
+        if (errno != ENOENT) {
+            rc = set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", name, strerror(errno));
+            goto fail;
+        }
+        if (ch->stop_flag && *ch->stop_flag) {
+            rc = set_err(ch, IPC_ERR_INTERRUPTED, "interrupted while waiting for segment %s", name);
+            goto fail;
+        }
+        if (now_s() - t0 > ch->connect_timeout) {
+            rc = set_err(ch, IPC_ERR_TIMEOUT, "no FEM peer created segment %s within %.1f s", name,
+                         ch->connect_timeout);
+            goto fail;
+        }
+        struct timespec ts = {0, 2 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    struct stat st;
+    if (fstat(fd, &st) != 0) {
+        rc = set_err(ch, IPC_ERR_SYS, "fstat %s: %s", name, strerror(errno));
+        close(fd);
+        goto fail;
+    }
+    /* Owner-only segments of our own user: never follow someone else's. */
+    if (st.st_uid != geteuid() || (st.st_mode & 077) != 0) {
+        rc = set_err(ch, IPC_ERR_STALE, "%s is owned by uid %u with mode %o: refusing to attach (want uid %u, 0600)",
+                     name, (unsigned)st.st_uid, (unsigned)(st.st_mode & 0777), (unsigned)geteuid());
+        close(fd);
+        goto fail;
+    }
+    /* The creator sizes the segment right after creating it; wait for that. */
+    while ((size_t)st.st_size < sizeof(ipc_segment_header)) {
+        if (now_s() - t0 > ch->connect_timeout) {
+            rc = set_err(ch, IPC_ERR_SIZE, "%s is %lld bytes, too small for a header", name, (long long)st.st_size);
+            close(fd);
+            goto fail;
+        }
+        struct timespec ts = {0, 2 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+        if (fstat(fd, &st) != 0) {
+            rc = set_err(ch, IPC_ERR_SYS, "fstat %s: %s", name, strerror(errno));
+            close(fd);
+            goto fail;
+        }
+    }
+    size_t file_size = (size_t)st.st_size;
+    void *p = mmap(NULL, file_size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    close(fd);
+    if (p == MAP_FAILED) {
+        rc = set_err(ch, IPC_ERR_SYS, "mmap %s: %s", name, strerror(errno));
+        goto fail;
+    }
+    ch->base = p;
+    ch->hdr = p;
+    ch->size = file_size;
+    ipc_segment_header *h = ch->hdr;
+
+    /* 2. Wait for the magic: the creator stores it last. */
+    while (atomic_load_explicit(&h->magic, memory_order_acquire) != IPC_MAGIC) {
+        if (now_s() - t0 > ch->connect_timeout) {
+            rc = set_err(ch, IPC_ERR_STALE, "%s has no valid header (bad magic): not a segment of this protocol",
+                         name);
+            goto fail;
+        }
+        struct timespec ts = {0, 2 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    rc = check_header(ch, file_size, my_version, def->expect_nodes);
+    if (rc)
+        goto fail;
+
+    /* 3. A live creator, still starting, with no DEM yet: else it is stale. */
+    int32_t fem_pid = atomic_load(&h->pid[IPC_ROLE_FEM]);
+    uint32_t state = atomic_load(&h->state);
+    int fem_alive = fem_pid > 0 && process_alive(fem_pid);
+    if (!fem_alive || state != IPC_STATE_STARTING) {
+        rc = set_err(ch, IPC_ERR_STALE,
+                     "%s is stale (creator pid %d %s, state %u): refusing to attach; remove /dev/shm%s", name,
+                     (int)fem_pid, fem_alive ? "alive" : "gone", state, name);
+        goto fail;
+    }
+    int32_t zero = 0;
+    if (!atomic_compare_exchange_strong(&h->pid[IPC_ROLE_DEM], &zero, (int32_t)getpid())) {
+        rc = set_err(ch, IPC_ERR_STALE, "%s already has a DEM peer (pid %d)", name, (int)zero);
+        goto fail;
+    }
+    rc = start_heartbeat(ch);
+    if (rc)
+        goto fail;
+
+    /* 4. Wait for the surface, then check it. */
+    while (!atomic_load_explicit(&h->surface_ready, memory_order_acquire)) {
+        rc = check_peer(ch, "the interface surface");
+        if (!rc && now_s() - t0 > ch->connect_timeout)
+            rc = set_err(ch, IPC_ERR_TIMEOUT, "FEM peer did not publish its surface within %.1f s",
+                         ch->connect_timeout);
+        if (rc)
+            goto fail;
+        struct timespec ts = {0, 1 * 1000 * 1000};
+        nanosleep(&ts, NULL);
+    }
+    rc = check_surface(ch);
+    if (rc) {
+        record_failure(ch, ch->err);
+        goto fail;
+    }
+
+    /* 5. Hello: our version and time step; the FEM accepts or refuses. */
+    h->dem_version = my_version;
+    h->dem_dt = def->dt;
+    h->dem_exchange_every = def->exchange_every;
+    sem_post(&h->sem_hello);
+    rc = wait_sem(ch, &h->sem_ack, ch->connect_timeout, "the FEM's answer to our hello", NULL);
+    if (rc)
+        goto fail;
+    if (atomic_load(&h->state) != IPC_STATE_RUNNING) {
+        char reason[IPC_REASON_LEN];
+        memcpy(reason, h->fail_reason, sizeof reason);
+        reason[IPC_REASON_LEN - 1] = '\0';
+        rc = set_err(ch, strstr(reason, "version") ? IPC_ERR_VERSION : IPC_ERR_MISMATCH,
+                     "FEM peer refused the handshake: %s", reason);
+        goto fail;
+    }
+    ch->dem_dt = def->dt;
+    ch->exchange_every = def->exchange_every;
+    *out = ch;
+    return IPC_OK;
+fail:
+    copy_err(err, errlen, ch->err);
+    channel_free(ch);
+    return rc;
+}
+
+/* ---- accessors -------------------------------------------------------------- */
+
+uint32_t ipc_surface_node_count(const ipc_channel *ch) { return ch->n_nodes; }
+uint32_t ipc_surface_tri_count(const ipc_channel *ch) { return ch->n_tris; }
+double *ipc_surface_nodes(ipc_channel *ch) { return (double *)(ch->base + ch->lay.nodes_offset); }
+uint32_t *ipc_surface_tris(ipc_channel *ch) { return (uint32_t *)(ch->base + ch->lay.tris_offset); }
+double ipc_dem_dt(const ipc_channel *ch) { return ch->dem_dt; }
+uint32_t ipc_exchange_every(const ipc_channel *ch) { return ch->exchange_every; }
+size_t ipc_send_len(const ipc_channel *ch) { return (size_t)ch->lay.payload_len[ch->peer]; }
+size_t ipc_recv_len(const ipc_channel *ch) { return (size_t)ch->lay.payload_len[ch->role]; }
+
+/* ---- frames ----------------------------------------------------------------- */
+
+static ipc_frame_head *slot(ipc_channel *ch, ipc_role receiver, uint64_t seq)
+{
+    uint64_t off = ch->lay.ring_offset[receiver] + (seq % ch->slots) * ch->lay.slot_size[receiver];
+    return (ipc_frame_head *)(ch->base + off);
+}
+
+/* Frames flow once the handshake is accepted. A finished peer may still have
+ * left its last frame in the ring, so FINISHED is not an error here: the wait
+ * takes a posted frame before it ever checks on the peer. */
+static int check_can_exchange(ipc_channel *ch)
+{
+    if (ch->stop_flag && *ch->stop_flag)
+        return set_err(ch, IPC_ERR_INTERRUPTED, "interrupted at exchange %llu",
+                       (unsigned long long)(ch->role == IPC_ROLE_DEM ? ch->send_seq : ch->recv_seq));
+    uint32_t state = atomic_load(&ch->hdr->state);
+    if (state == IPC_STATE_RUNNING || state == IPC_STATE_FINISHED)
+        return IPC_OK;
+    int rc = check_peer(ch, "a frame");
+    return rc ? rc : set_err(ch, IPC_ERR_PROTOCOL, "exchange attempted in state %u", state);
+}
+
+int ipc_send_begin(ipc_channel *ch, ipc_frame_head **head, double **payload)
+{
+    if (ch->send_open)
+        return set_err(ch, IPC_ERR_ARG, "ipc_send_begin twice without ipc_send_commit");
+    int rc = check_can_exchange(ch);
+    if (rc)
+        return rc;
+    char what[96];
+    snprintf(what, sizeof what, "a free slot for exchange %llu", (unsigned long long)ch->send_seq);
+    rc = wait_sem(ch, &ch->hdr->sem_empty[ch->peer], 0, what, &ch->stats.wait_send_s);
+    if (rc)
+        return rc;
+    ipc_frame_head *f = slot(ch, ch->peer, ch->send_seq);
+    memset(f, 0, sizeof *f);
+    f->kind = IPC_FRAME_DATA;
+    *head = f;
+    *payload = (double *)(f + 1);
+    ch->send_open = 1;
+    return IPC_OK;
+}
+
+int ipc_send_commit(ipc_channel *ch)
+{
+    if (!ch->send_open)
+        return set_err(ch, IPC_ERR_ARG, "ipc_send_commit without ipc_send_begin");
+    ipc_frame_head *f = slot(ch, ch->peer, ch->send_seq);
+    f->seq = ch->send_seq;
+    if (ch->flags & IPC_SEG_CHECKSUM)
+        f->checksum = ipc_checksum(f + 1, ch->lay.payload_len[ch->peer] * sizeof(double));
+    ch->send_open = 0;
+    ch->send_seq++;
+    ch->stats.frames_sent++;
+    sem_post(&ch->hdr->sem_full[ch->peer]);
+    return IPC_OK;
+}
+
+int ipc_recv(ipc_channel *ch, const ipc_frame_head **head, const double **payload)
+{
+    if (ch->recv_open)
+        return set_err(ch, IPC_ERR_ARG, "ipc_recv twice without ipc_recv_release");
+    int rc = check_can_exchange(ch);
+    if (rc)
+        return rc;
+    char what[96];
+    snprintf(what, sizeof what, "exchange %llu", (unsigned long long)ch->recv_seq);
+    rc = wait_sem(ch, &ch->hdr->sem_full[ch->role], 0, what, &ch->stats.wait_recv_s);
+    if (rc)
+        return rc;
+    ipc_frame_head *f = slot(ch, ch->role, ch->recv_seq);
+    uint64_t seq = f->seq;
+    if (seq != ch->recv_seq) {
+        rc = set_err(ch, IPC_ERR_PROTOCOL, "exchange out of order from %s: expected frame %llu, got %llu",
+                     ipc_role_name(ch->peer), (unsigned long long)ch->recv_seq, (unsigned long long)seq);
+        record_failure(ch, ch->err);
+        return rc;
+    }
+    if (f->kind != IPC_FRAME_DATA && f->kind != IPC_FRAME_FINISH) {
+        rc = set_err(ch, IPC_ERR_PROTOCOL, "frame %llu from %s has unknown kind %u", (unsigned long long)seq,
+                     ipc_role_name(ch->peer), f->kind);
+        record_failure(ch, ch->err);
+        return rc;
+    }
+    if (ch->flags & IPC_SEG_CHECKSUM) {
+        uint64_t sum = ipc_checksum(f + 1, ch->lay.payload_len[ch->role] * sizeof(double));
+        if (sum != f->checksum) {
+            rc = set_err(ch, IPC_ERR_PROTOCOL, "frame %llu from %s: payload checksum mismatch",
+                         (unsigned long long)seq, ipc_role_name(ch->peer));
+            record_failure(ch, ch->err);
+            return rc;
+        }
+    }
+    *head = f;
+    *payload = (const double *)(f + 1);
+    ch->recv_open = 1;
+    return IPC_OK;
+}
+
+int ipc_recv_release(ipc_channel *ch)
+{
+    if (!ch->recv_open)
+        return set_err(ch, IPC_ERR_ARG, "ipc_recv_release without ipc_recv");
+    ch->recv_open = 0;
+    ch->recv_seq++;
+    ch->stats.frames_received++;
+    sem_post(&ch->hdr->sem_empty[ch->role]);
+    return IPC_OK;
+}
+
+void ipc_fail(ipc_channel *ch, const char *fmt, ...)
+{
+    if (!ch || !ch->hdr)
+        return;
+    char reason[IPC_REASON_LEN];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(reason, sizeof reason, fmt, ap);
+    va_end(ap);
+    record_failure(ch, reason);
+}
+
+void ipc_close(ipc_channel **chp, int status)
+{
+    if (!chp || !*chp)
+        return;
+    ipc_channel *ch = *chp;
+    if (ch->hdr) {
+        if (status == IPC_OK) {
+            uint32_t running = IPC_STATE_RUNNING;
+            atomic_compare_exchange_strong(&ch->hdr->state, &running, IPC_STATE_FINISHED);
+        } else if (atomic_load(&ch->hdr->state) != IPC_STATE_FAILED) {
+            char reason[sizeof ch->err + 64]; /* record_failure truncates to the header's size */
+            snprintf(reason, sizeof reason, "%s: %s", ipc_status_name(status), ch->err[0] ? ch->err : "stopped");
+            record_failure(ch, reason);
+        }
+    }
+    channel_free(ch);
+    *chp = NULL;
+}

@@ -1,0 +1,540 @@
+/* Protocol integration tests: two real processes (ipc_peer) on a real POSIX
+ * shared-memory segment. Each test checks exit codes, what the survivor says
+ * and how fast, and that nothing is left in /dev/shm. */
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdatomic.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ipc.h"
+#include "segment.h"
+#include "test.h"
+
+extern char **environ;
+
+#ifndef IPC_PEER_PATH
+#error "IPC_PEER_PATH must point at the ipc_peer executable"
+#endif
+
+typedef struct peer {
+    pid_t pid;
+    char log[256]; /* stderr + stdout of the process */
+    int status;    /* exit status once reaped */
+    double t_exit; /* when it was reaped */
+} peer;
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static void sleep_ms(int ms)
+{
+    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
+    nanosleep(&ts, NULL);
+}
+
+static void unique_name(char *buf, size_t len, const char *what)
+{
+    static int counter;
+    snprintf(buf, len, "/demfem-test-%d-%s-%d", (int)getpid(), what, counter++);
+}
+
+/* Starts ipc_peer with the given NULL-terminated extra arguments. */
+static int spawn_peer(peer *p, const char *role, const char *shm, const char *const *args)
+{
+    const char *argv[40];
+    int n = 0;
+    argv[n++] = IPC_PEER_PATH;
+    argv[n++] = "--role";
+    argv[n++] = role;
+    argv[n++] = "--shm";
+    argv[n++] = shm;
+    for (int i = 0; args && args[i] && n < 38; i++)
+        argv[n++] = args[i];
+    argv[n] = NULL;
+    snprintf(p->log, sizeof p->log, "/tmp/demfem-test-%d-%s-%s.log", (int)getpid(), role, shm + 1);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, p->log, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    int rc = posix_spawn(&p->pid, IPC_PEER_PATH, &fa, NULL, (char *const *)argv, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    p->status = -1;
+    return rc;
+}
+
+/* Waits up to timeout_s for the peer to exit; returns 0 when it did. */
+static int reap(peer *p, double timeout_s)
+{
+    double t0 = now();
+    for (;;) {
+        int st;
+        pid_t r = waitpid(p->pid, &st, WNOHANG);
+        if (r == p->pid) {
+            p->status = st;
+            p->t_exit = now();
+            return 0;
+        }
+        if (now() - t0 > timeout_s)
+            return -1;
+        sleep_ms(2);
+    }
+}
+
+static void kill_and_reap(peer *p)
+{
+    if (p->status == -1) {
+        kill(p->pid, SIGKILL);
+        reap(p, 5.0);
+    }
+}
+
+static int exit_code(const peer *p) { return WIFEXITED(p->status) ? WEXITSTATUS(p->status) : 128 + WTERMSIG(p->status); }
+
+/* Whether the peer's log contains needle (case-sensitive). */
+static int log_has(const peer *p, const char *needle)
+{
+    FILE *f = fopen(p->log, "r");
+    if (!f)
+        return 0;
+    char buf[8192];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    return strstr(buf, needle) != NULL;
+}
+
+static void print_log(const peer *p)
+{
+    FILE *f = fopen(p->log, "r");
+    if (!f)
+        return;
+    char line[1024];
+    while (fgets(line, sizeof line, f))
+        fprintf(stderr, "    | %s", line);
+    fclose(f);
+}
+
+static int shm_exists(const char *name)
+{
+    char path[300];
+    snprintf(path, sizeof path, "/dev/shm%s", name);
+    return access(path, F_OK) == 0;
+}
+
+/* Waits until the segment appears (the FEM peer created it). */
+static int wait_shm(const char *name, double timeout_s)
+{
+    double t0 = now();
+    while (!shm_exists(name)) {
+        if (now() - t0 > timeout_s)
+            return -1;
+        sleep_ms(1);
+    }
+    return 0;
+}
+
+#define ENSURE_EXIT(p, code)                                                                 \
+    do {                                                                                     \
+        if (exit_code(p) != (code)) {                                                        \
+            fprintf(stderr, "%s:%d: %s exited %d, expected %d; its log:\n", __FILE__, __LINE__, \
+                    #p, exit_code(p), (code));                                               \
+            print_log(p);                                                                    \
+            return 1;                                                                        \
+        }                                                                                    \
+    } while (0)
+
+#define ENSURE_LOG(p, needle)                                                                \
+    do {                                                                                     \
+        if (!log_has(p, needle)) {                                                           \
+            fprintf(stderr, "%s:%d: %s's log lacks \"%s\"; its log:\n", __FILE__, __LINE__, #p,  \
+                    needle);                                                                 \
+            print_log(p);                                                                    \
+            return 1;                                                                        \
+        }                                                                                    \
+    } while (0)
+
+/* ---- normal runs -------------------------------------------------------------- */
+
+/* 10 000 round trips of 20 000 nodes (480 kB out, 960 kB back), checksummed,
+ * every value checked by the receiving process. */
+static int roundtrip_10000(void)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, "rt");
+    peer fem, dem;
+    const char *fa[] = {"--nodes", "20000", "--checksum", "--expect-dt", "1e-05", NULL};
+    const char *da[] = {"--exchanges", "10000", "--dt", "1e-05", NULL};
+    double t0 = now();
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    int ok = reap(&dem, 300) == 0 && reap(&fem, 10) == 0;
+    double wall = now() - t0;
+    kill_and_reap(&dem);
+    kill_and_reap(&fem);
+    ENSURE(ok);
+    ENSURE_EXIT(&dem, 0);
+    ENSURE_EXIT(&fem, 0);
+    ENSURE_LOG(&fem, "10000 exchanges ok");
+    ENSURE_LOG(&dem, "10000 exchanges ok");
+    ENSURE(!shm_exists(shm));
+    printf("  10000 round trips of 20000 nodes in %.2f s (%.0f us each, incl. filling and checking)\n", wall,
+           1e6 * wall / 10000);
+    return 0;
+}
+
+static int dem_starts_first(void)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, "demfirst");
+    peer fem, dem;
+    const char *da[] = {"--exchanges", "2000", NULL};
+    const char *fa[] = {"--nodes", "500", "--checksum", NULL};
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    sleep_ms(300); /* the DEM waits for the segment */
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    int ok = reap(&dem, 60) == 0 && reap(&fem, 10) == 0;
+    kill_and_reap(&dem);
+    kill_and_reap(&fem);
+    ENSURE(ok);
+    ENSURE_EXIT(&dem, 0);
+    ENSURE_EXIT(&fem, 0);
+    ENSURE(!shm_exists(shm));
+    return 0;
+}
+
+/* A deeper ring and exchange_every > 1 change nothing in the content. */
+static int ring_of_four_slots(void)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, "slots");
+    peer fem, dem;
+    const char *fa[] = {"--nodes", "300", "--slots", "4", "--expect-dt", "5e-05", NULL};
+    const char *da[] = {"--exchanges", "3000", "--dt", "1e-05", "--every", "5", NULL};
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    int ok = reap(&dem, 60) == 0 && reap(&fem, 10) == 0;
+    kill_and_reap(&dem);
+    kill_and_reap(&fem);
+    ENSURE(ok);
+    ENSURE_EXIT(&dem, 0);
+    ENSURE_EXIT(&fem, 0);
+    return 0;
+}
+
+/* ---- a peer dies, stops or is interrupted ---------------------------------------- */
+
+/* Starts a long run, waits until it is exchanging, delivers sig to one side;
+ * the other must exit non-zero within 2 s naming the victim. */
+static int peer_lost(const char *victim_role, int sig, const char *survivor_says)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, victim_role);
+    peer fem, dem;
+    const char *fa[] = {"--nodes", "2000", NULL};
+    const char *da[] = {"--exchanges", "100000000", NULL};
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    /* Running once the name is unlinked after the handshake. */
+    int up = wait_shm(shm, 5.0) == 0;
+    double t0 = now();
+    while (up && shm_exists(shm) && now() - t0 < 5.0)
+        sleep_ms(1);
+    sleep_ms(200);
+    peer *victim = strcmp(victim_role, "fem") == 0 ? &fem : &dem;
+    peer *survivor = victim == &fem ? &dem : &fem;
+    double t_kill = now();
+    kill(victim->pid, sig);
+    int survived = reap(survivor, 5.0) == 0;
+    double dt = survived ? survivor->t_exit - t_kill : 99;
+    if (sig == SIGSTOP)
+        kill(victim->pid, SIGKILL);
+    reap(victim, 5.0);
+    kill_and_reap(&fem);
+    kill_and_reap(&dem);
+    ENSURE(up);
+    ENSURE_MSG(survived && dt < 2.0, "survivor took %.2f s to exit", dt);
+    ENSURE_MSG(exit_code(survivor) != 0, "survivor exited 0");
+    ENSURE_LOG(survivor, survivor_says);
+    ENSURE(!shm_exists(shm));
+    printf("  %s got signal %d: survivor exited %d after %.3f s\n", victim_role, sig, exit_code(survivor), dt);
+    return 0;
+}
+
+static int fem_killed(void) { return peer_lost("fem", SIGKILL, "peer fem"); }
+static int dem_killed(void) { return peer_lost("dem", SIGKILL, "peer dem"); }
+static int fem_stopped(void) { return peer_lost("fem", SIGSTOP, "stopped answering"); }
+static int dem_stopped(void) { return peer_lost("dem", SIGSTOP, "stopped answering"); }
+static int fem_sigterm(void) { return peer_lost("fem", SIGTERM, "peer fem failed"); }
+static int dem_sigint(void) { return peer_lost("dem", SIGINT, "peer dem failed"); }
+
+/* The FEM side dies before anybody attached: the segment stays behind (the
+ * launcher removes such leftovers); a new run with that name is refused. */
+static int stale_segment_refused(void)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, "stale");
+    peer fem, fem2, dem;
+    const char *fa[] = {"--nodes", "100", "--connect", "30", NULL};
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    ENSURE(wait_shm(shm, 5.0) == 0);
+    sleep_ms(100);
+    kill(fem.pid, SIGKILL);
+    reap(&fem, 5.0);
+    ENSURE(shm_exists(shm));
+
+    const char *fa2[] = {"--nodes", "100", NULL};
+    ENSURE(spawn_peer(&fem2, "fem", shm, fa2) == 0);
+    const char *da[] = {"--connect", "5", NULL};
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    int ok = reap(&fem2, 5.0) == 0 && reap(&dem, 5.0) == 0;
+    kill_and_reap(&fem2);
+    kill_and_reap(&dem);
+    shm_unlink(shm);
+    ENSURE(ok);
+    ENSURE_EXIT(&fem2, 3);
+    ENSURE_LOG(&fem2, "already exists");
+    ENSURE_EXIT(&dem, 3);
+    ENSURE_LOG(&dem, "stale");
+    return 0;
+}
+
+/* ---- handshake refusals ------------------------------------------------------- */
+
+static int refused_both_sides(const char *tag, const char *const *fa, const char *const *da, const char *needle)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, tag);
+    peer fem, dem;
+    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+    int ok = reap(&dem, 10) == 0 && reap(&fem, 10) == 0;
+    kill_and_reap(&dem);
+    kill_and_reap(&fem);
+    ENSURE(ok);
+    ENSURE_EXIT(&dem, 3);
+    ENSURE_EXIT(&fem, 3);
+    ENSURE_LOG(&dem, needle);
+    ENSURE_LOG(&fem, needle);
+    ENSURE(!shm_exists(shm));
+    return 0;
+}
+
+static int version_mismatch(void)
+{
+    const char *fa[] = {"--nodes", "100", NULL};
+    const char *da[] = {"--version", "7", NULL};
+    return refused_both_sides("ver", fa, da, "version mismatch");
+}
+
+static int size_mismatch(void)
+{
+    const char *fa[] = {"--nodes", "100", NULL};
+    const char *da[] = {"--expect-nodes", "99", NULL};
+    return refused_both_sides("size", fa, da, "size mismatch");
+}
+
+static int time_step_mismatch(void)
+{
+    const char *fa[] = {"--nodes", "100", "--expect-dt", "1e-05", NULL};
+    const char *da[] = {"--dt", "2e-05", NULL};
+    return refused_both_sides("dt", fa, da, "time step mismatch");
+}
+
+/* ---- corrupted segments: every size and index is checked -------------------- */
+
+enum corruption { C_NODES, C_SEGSIZE, C_RING_OFFSET, C_SLOT_SIZE, C_HEADER_SIZE, C_TRI_INDEX, C_NAN_NODE, C_COUNT };
+
+static int corrupted_header_refused(void)
+{
+    static const char *const expect[C_COUNT] = {"size mismatch", "size mismatch", "size mismatch",
+                                                "size mismatch", "size mismatch", "invalid node indices",
+                                                "non-finite"};
+    for (int c = 0; c < C_COUNT; c++) {
+        char shm[128];
+        unique_name(shm, sizeof shm, "corrupt");
+        ipc_create_def def = ipc_default_create_def();
+        def.n_nodes = 64;
+        def.n_tris = 100;
+        def.connect_timeout = 5;
+        ipc_channel *ch;
+        char err[512];
+        ENSURE_MSG(ipc_create(shm, &def, &ch, err, sizeof err) == IPC_OK, "%s", err);
+        double *x = ipc_surface_nodes(ch);
+        uint32_t *t = ipc_surface_tris(ch);
+        for (int i = 0; i < 3 * 64; i++)
+            x[i] = 0.01 * i;
+        for (int k = 0; k < 100; k++) {
+            t[3 * k] = (uint32_t)(k % 64);
+            t[3 * k + 1] = (uint32_t)((k + 1) % 64);
+            t[3 * k + 2] = (uint32_t)((k + 2) % 64);
+        }
+        /* Reach into the segment as a buggy or hostile writer would. */
+        int fd = shm_open(shm, O_RDWR, 0);
+        ENSURE(fd >= 0);
+        ipc_segment_header *h = mmap(NULL, IPC_PAGE, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+        close(fd);
+        ENSURE(h != MAP_FAILED);
+        switch (c) {
+        case C_NODES: h->n_nodes = 65; break;
+        case C_SEGSIZE: h->segment_size += 4096; break;
+        case C_RING_OFFSET: h->ring_offset[IPC_ROLE_DEM] += 64; break;
+        case C_SLOT_SIZE: h->slot_size[IPC_ROLE_FEM] = 1u << 30; break;
+        case C_HEADER_SIZE: h->header_size = 12; break;
+        case C_TRI_INDEX: t[3 * 57 + 1] = 64; break;
+        case C_NAN_NODE: x[3 * 10 + 2] = NAN; break;
+        }
+        munmap(h, IPC_PAGE);
+        peer dem;
+        const char *da[] = {"--connect", "5", NULL};
+        ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+        int rc = ipc_accept(ch); /* the DEM refuses: we must hear about it, not hang */
+        int ok = reap(&dem, 10) == 0;
+        kill_and_reap(&dem);
+        ipc_close(&ch, rc);
+        ENSURE(ok);
+        ENSURE_MSG(rc != IPC_OK, "corruption %d accepted", c);
+        ENSURE_EXIT(&dem, 3);
+        ENSURE_LOG(&dem, expect[c]);
+        ENSURE(!shm_exists(shm));
+    }
+    return 0;
+}
+
+/* A frame whose sequence number is wrong (lost, repeated, reordered) stops
+ * the receiver with a message naming both numbers. */
+static int out_of_order_frame_refused(void)
+{
+    char shm[128];
+    unique_name(shm, sizeof shm, "order");
+    ipc_create_def def = ipc_default_create_def();
+    def.n_nodes = 10;
+    def.n_tris = 4;
+    ipc_channel *fem;
+    char err[512];
+    ENSURE(ipc_create(shm, &def, &fem, err, sizeof err) == IPC_OK);
+    double *x = ipc_surface_nodes(fem);
+    uint32_t *t = ipc_surface_tris(fem);
+    for (int i = 0; i < 30; i++)
+        x[i] = i;
+    for (int k = 0; k < 4; k++) {
+        t[3 * k] = (uint32_t)k;
+        t[3 * k + 1] = (uint32_t)k + 1;
+        t[3 * k + 2] = (uint32_t)k + 2;
+    }
+    pid_t child = fork();
+    if (child == 0) {
+        /* DEM side in a child process: send frame 0, then a frame claiming seq 5. */
+        ipc_attach_def ad = ipc_default_attach_def();
+        ad.dt = 1e-5;
+        ipc_channel *dem;
+        if (ipc_attach(shm, &ad, &dem, err, sizeof err))
+            _exit(10);
+        for (int k = 0; k < 2; k++) {
+            ipc_frame_head *h;
+            double *f;
+            if (ipc_send_begin(dem, &h, &f))
+                _exit(11);
+            ipc_send_commit(dem);
+            if (k == 1)
+                h->seq = 5; /* corrupt it after the commit stamped it */
+            const ipc_frame_head *rh;
+            const double *p;
+            if (k == 0) {
+                if (ipc_recv(dem, &rh, &p))
+                    _exit(12);
+                ipc_recv_release(dem);
+            }
+        }
+        sleep_ms(500);
+        ipc_close(&dem, IPC_OK);
+        _exit(0);
+    }
+    int rc = ipc_accept(fem);
+    ENSURE_MSG(rc == IPC_OK, "%s", ipc_error(fem));
+    const ipc_frame_head *h;
+    const double *f;
+    ENSURE(ipc_recv(fem, &h, &f) == IPC_OK && h->seq == 0);
+    ipc_recv_release(fem);
+    ipc_frame_head *oh;
+    double *p;
+    ENSURE(ipc_send_begin(fem, &oh, &p) == IPC_OK);
+    ENSURE(ipc_send_commit(fem) == IPC_OK);
+    /* The race between commit and the corruption is closed by waiting a bit. */
+    sleep_ms(100);
+    rc = ipc_recv(fem, &h, &f);
+    int st;
+    waitpid(child, &st, 0);
+    ENSURE(rc == IPC_ERR_PROTOCOL);
+    ENSURE_MSG(strstr(ipc_error(fem), "expected frame 1, got 5"), "%s", ipc_error(fem));
+    ipc_close(&fem, rc);
+    ENSURE(!shm_exists(shm));
+    return 0;
+}
+
+static int names_and_layout(void)
+{
+    ENSURE(ipc_name_valid("/demfem-123_a.b"));
+    ENSURE(!ipc_name_valid("demfem"));
+    ENSURE(!ipc_name_valid("/"));
+    ENSURE(!ipc_name_valid("/a/b"));
+    ENSURE(!ipc_name_valid("/a b"));
+    ipc_layout lay;
+    ENSURE(ipc_layout_compute(0, 1, 2, &lay) != 0);
+    ENSURE(ipc_layout_compute(IPC_MAX_NODES + 1, 1, 2, &lay) != 0);
+    ENSURE(ipc_layout_compute(10, 1, 17, &lay) != 0);
+    ENSURE(ipc_layout_compute(20000, 40000, 2, &lay) == 0);
+    /* Slots hold the head plus the payload, aligned; rings do not overlap. */
+    ENSURE(lay.slot_size[IPC_ROLE_FEM] >= sizeof(ipc_frame_head) + 3 * 20000 * 8);
+    ENSURE(lay.slot_size[IPC_ROLE_DEM] >= sizeof(ipc_frame_head) + 6 * 20000 * 8);
+    ENSURE(lay.tris_offset >= lay.nodes_offset + 3 * 20000 * 8);
+    ENSURE(lay.ring_offset[IPC_ROLE_FEM] >= lay.tris_offset + 3 * 40000 * 4);
+    ENSURE(lay.ring_offset[IPC_ROLE_DEM] >= lay.ring_offset[IPC_ROLE_FEM] + 2 * lay.slot_size[IPC_ROLE_FEM]);
+    ENSURE(lay.segment_size >= lay.ring_offset[IPC_ROLE_DEM] + 2 * lay.slot_size[IPC_ROLE_DEM]);
+    ENSURE(lay.ring_offset[IPC_ROLE_FEM] % 64 == 0 && lay.slot_size[IPC_ROLE_DEM] % 64 == 0);
+    /* The checksum sees a single flipped bit. */
+    double a[100];
+    for (int i = 0; i < 100; i++)
+        a[i] = i * 0.5;
+    uint64_t c0 = ipc_checksum(a, sizeof a);
+    ((unsigned char *)a)[333] ^= 4;
+    ENSURE(ipc_checksum(a, sizeof a) != c0);
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"names_and_layout", names_and_layout},
+    {"roundtrip_10000", roundtrip_10000},
+    {"dem_starts_first", dem_starts_first},
+    {"ring_of_four_slots", ring_of_four_slots},
+    {"fem_killed", fem_killed},
+    {"dem_killed", dem_killed},
+    {"fem_stopped", fem_stopped},
+    {"dem_stopped", dem_stopped},
+    {"fem_sigterm", fem_sigterm},
+    {"dem_sigint", dem_sigint},
+    {"stale_segment_refused", stale_segment_refused},
+    {"version_mismatch", version_mismatch},
+    {"size_mismatch", size_mismatch},
+    {"time_step_mismatch", time_step_mismatch},
+    {"corrupted_header_refused", corrupted_header_refused},
+    {"out_of_order_frame_refused", out_of_order_frame_refused},
+};
+
+int main(int argc, char **argv)
+{
+    signal(SIGPIPE, SIG_IGN);
+    return test_main(argc, argv, tests, TEST_COUNT(tests));
+}

@@ -493,7 +493,8 @@ int cm_h5_step_begin(cm_h5 *f, long step, double time, cm_error *err)
         return cm_fail(err, CM_ERR_STATE, "%s: step %ld begun while step %ld is still open", f->path, step,
                        f->step);
     if (step < 0 || step <= f->last_step)
-        return cm_fail(err, CM_ERR_STATE, "%s: step %ld does not follow step %ld", f->path, step, f->last_step);
+        return cm_fail(err, CM_ERR_STATE, "%s: step %ld does not follow step %ld (steps must increase)", f->path,
+                       step, f->last_step);
     snprintf(f->group, sizeof f->group, "/steps/%06ld", step);
     f->gid = H5Gcreate2(f->fid, f->group, f->lcpl, H5P_DEFAULT, H5P_DEFAULT);
     if (f->gid < 0)
@@ -613,23 +614,29 @@ static int ensure_vertex_ids(cm_h5 *f, size_t n, cm_error *err)
     return rc;
 }
 
+static int missing_static(cm_h5 *f, const char *role, const char *path, cm_error *err)
+{
+    char why[sizeof err->msg];
+    snprintf(why, sizeof why, "%s", err ? err->msg : "");
+    return cm_fail(err, CM_ERR_STATE, "%s: XDMF %s %s must be written before the first step ends (%s)", f->path,
+                   role, path, why);
+}
+
 /* Looks up the static datasets the XDMF grid refers to (once). */
 static int static_sizes(cm_h5 *f, cm_error *err)
 {
     int rank, is_int;
     hsize_t dims[2];
     if (f->geometry_static && f->static_points == 0) {
-        int rc = dataset_shape(f, f->geometry, &rank, dims, &is_int, err);
-        if (rc != CM_OK)
-            return cm_fail_prefix(err, "XDMF geometry: ");
+        if (dataset_shape(f, f->geometry, &rank, dims, &is_int, err) != CM_OK)
+            return missing_static(f, "geometry", f->geometry, err);
         if (rank != 2 || dims[1] != 3 || is_int)
             return cm_fail(err, CM_ERR_RANGE, "%s: XDMF geometry %s must be n x 3 doubles", f->path, f->geometry);
         f->static_points = (size_t)dims[0];
     }
     if (f->xdmf == CM_H5_XDMF_TETRAHEDRON && f->cells == 0) {
-        int rc = dataset_shape(f, f->connectivity, &rank, dims, &is_int, err);
-        if (rc != CM_OK)
-            return cm_fail_prefix(err, "XDMF connectivity: ");
+        if (dataset_shape(f, f->connectivity, &rank, dims, &is_int, err) != CM_OK)
+            return missing_static(f, "connectivity", f->connectivity, err);
         if (rank != 2 || dims[1] != 4 || !is_int)
             return cm_fail(err, CM_ERR_RANGE, "%s: XDMF connectivity %s must be m x 4 ints", f->path,
                            f->connectivity);

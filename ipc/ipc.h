@@ -70,11 +70,12 @@ enum { IPC_FLAG_STOP_REQUEST = 1u }; /* FEM -> DEM: please end the run (send FIN
 enum {
     /* DEM -> FEM: totals of what the grains put on the surface this exchange. */
     IPC_INFO_FORCE_X = 0, IPC_INFO_FORCE_Y, IPC_INFO_FORCE_Z, /* N, sum over contacts */
-    IPC_INFO_MOMENT_X, IPC_INFO_MOMENT_Y, IPC_INFO_MOMENT_Z,  /* N m, about the wheel centre */
+    IPC_INFO_MOMENT_X, IPC_INFO_MOMENT_Y, IPC_INFO_MOMENT_Z,  /* N m, about the world origin */
     IPC_INFO_TRACTION_POS,  /* N, sum of positive travel-direction contact forces (T_H) */
     IPC_INFO_TRACTION_NEG,  /* N, sum of negative ones (T_R, <= 0) */
     IPC_INFO_CONTACTS,      /* number of grain-surface contacts */
     IPC_INFO_DEM_WORK,      /* J, interface work seen by the DEM, accumulated */
+    IPC_INFO_BED_HEIGHT,    /* m, height of the undisturbed bed surface (0 if none) */
     /* FEM -> DEM: wheel state, world frame. */
     IPC_INFO_CENTER_X = 16, IPC_INFO_CENTER_Y, IPC_INFO_CENTER_Z, /* m */
     IPC_INFO_VEL_X, IPC_INFO_VEL_Y, IPC_INFO_VEL_Z,              /* m/s */

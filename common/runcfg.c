@@ -1,0 +1,20 @@
+#include "runcfg.h"
+
+#include <string.h>
+
+int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
+{
+    memset(c, 0, sizeof *c);
+    long every = 1;
+    int rc;
+    if ((rc = cm_scene_string_opt(s, "run.name", "run", c->name, sizeof c->name, err)) ||
+        (rc = cm_scene_double(s, "run.end_time", 0.0, 1e6, &c->end_time, err)) ||
+        (rc = cm_scene_double_opt(s, "run.progress_every", 0.0, 3600.0, 2.0, &c->progress_every, err)) ||
+        (rc = cm_scene_double(s, "coupling.dt", 1e-12, 1.0, &c->dt, err)) ||
+        (rc = cm_scene_int_opt(s, "coupling.exchange_every", 1, 100000, 1, &every, err)) ||
+        (rc = cm_scene_double_opt(s, "coupling.stall_timeout", 0.1, 60.0, 1.0, &c->stall_timeout, err)) ||
+        (rc = cm_scene_double_opt(s, "coupling.connect_timeout", 1.0, 3600.0, 120.0, &c->connect_timeout, err)))
+        return rc;
+    c->exchange_every = (int)every;
+    return CM_OK;
+}

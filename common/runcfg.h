@@ -1,0 +1,24 @@
+/* The scene sections both servers read the same way: `run` (what the run is
+ * and when it ends) and `coupling` (the time step and the exchange). */
+#ifndef CM_RUNCFG_H
+#define CM_RUNCFG_H
+
+#include "error.h"
+#include "scene.h"
+
+typedef struct cm_run_config {
+    char name[64];         /* run.name: label for logs and output files */
+    double end_time;       /* run.end_time, s: simulated time at which the DEM side ends the run */
+    double progress_every; /* run.progress_every, s of wall time between progress lines (default 2) */
+    double dt;             /* coupling.dt, s: the DEM time step */
+    int exchange_every;    /* coupling.exchange_every: DEM steps per exchange (default 1) */
+    double stall_timeout;  /* coupling.stall_timeout, s: peer silent this long counts as dead (default 1) */
+    double connect_timeout;/* coupling.connect_timeout, s: wait this long for the peer to start (default 120) */
+} cm_run_config;
+
+int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err);
+
+/* The exchange interval dt * exchange_every, s. */
+static inline double cm_run_exchange_dt(const cm_run_config *c) { return c->dt * c->exchange_every; }
+
+#endif

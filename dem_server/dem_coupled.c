@@ -1,0 +1,197 @@
+/* The coupled DEM loop: dem_server's side of the exchange with fem_server
+ * (ipc/PROTOCOL.md), the paper's fig. 8 split over two processes.
+ *
+ * Per exchange n (every k = coupling.exchange_every DEM steps):
+ *   k x  dem_step_surface   grain–wall and grain–triangle forces at x(t),
+ *                           node forces summed over the interval
+ *        send               the interval's mean node forces (eq. 42) and totals
+ *   k x  dem_step_grains    grain–grain work, overlapping the FEM's step
+ *        receive            surface positions and velocities at t + k dt
+ *        dem_surface_update BVH refit
+ * With k > 1 the surface moves with its nodes' velocities between exchanges. */
+#include "dem_coupled.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ipc.h"
+#include "log.h"
+#include "timer.h"
+
+typedef struct coupled {
+    dem_world *w;
+    ipc_channel *ch;
+    uint32_t nn;
+    int *tris;
+    double *f_sum, *x, *v, *x_sub;
+    double w_dem; /* J, interface work seen by the DEM */
+} coupled;
+
+static void coupled_free(coupled *c)
+{
+    free(c->tris);
+    free(c->f_sum);
+    free(c->x);
+    free(c->v);
+    free(c->x_sub);
+}
+
+/* Surface positions a fraction of the interval ahead, from the node
+ * velocities the FEM sent (first-order extrapolation inside the interval). */
+static int move_surface(coupled *c, double tau, cm_error *err)
+{
+    size_t m = 3 * (size_t)c->nn;
+    for (size_t j = 0; j < m; j++)
+        c->x_sub[j] = c->x[j] + tau * c->v[j];
+    return dem_surface_update(c->w, c->x_sub, c->v, err);
+}
+
+int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks *hooks, cm_error *err)
+{
+    coupled c = {.w = w};
+    ipc_attach_def ad = ipc_default_attach_def();
+    ad.dt = def->dt;
+    ad.exchange_every = (uint32_t)def->exchange_every;
+    ad.stall_timeout = def->stall_timeout;
+    ad.connect_timeout = def->connect_timeout;
+    ad.stop_flag = def->stop_flag;
+    char ipc_err[512];
+    cm_log_info("attaching to %s (dt %.3g s, exchange every %d steps)", def->shm, def->dt, def->exchange_every);
+    int rc = ipc_attach(def->shm, &ad, &c.ch, ipc_err, sizeof ipc_err);
+    if (rc)
+        return cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_err);
+
+    c.nn = ipc_surface_node_count(c.ch);
+    uint32_t nt = ipc_surface_tri_count(c.ch);
+    size_t m = 3 * (size_t)c.nn;
+    c.tris = malloc(3 * (size_t)nt * sizeof *c.tris);
+    c.f_sum = calloc(m, sizeof *c.f_sum);
+    c.x = malloc(m * sizeof *c.x);
+    c.v = calloc(m, sizeof *c.v);
+    c.x_sub = malloc(m * sizeof *c.x_sub);
+    if (!c.tris || !c.f_sum || !c.x || !c.v || !c.x_sub) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "out of memory for a surface of %u nodes", c.nn);
+        goto done;
+    }
+    const uint32_t *t = ipc_surface_tris(c.ch);
+    for (size_t k = 0; k < 3 * (size_t)nt; k++)
+        c.tris[k] = (int)t[k]; /* ipc checked every index against the node count */
+    memcpy(c.x, ipc_surface_nodes(c.ch), m * sizeof *c.x);
+    if ((rc = dem_surface_set(w, (int)c.nn, c.x, (int)nt, c.tris, def->surface_material, err)))
+        goto done;
+    /* Moments about the world origin and traction along +x (the protocol's). */
+    const double origin[3] = {0, 0, 0}, travel[3] = {1, 0, 0};
+    dem_surface_set_frame(w, origin, travel);
+    cm_log_info("surface: %u nodes, %u triangles from fem_server", c.nn, nt);
+
+    const int k_steps = def->exchange_every;
+    const double interval = def->dt * k_steps;
+    double time = 0, last_progress = cm_now(), t_start = cm_now();
+    long n = 0;
+    int stop_requested = 0;
+    for (;; n++) {
+        int finish = stop_requested || time >= def->end_time - 0.5 * def->dt;
+        dem_surface_total acc;
+        memset(&acc, 0, sizeof acc);
+        memset(c.f_sum, 0, m * sizeof *c.f_sum);
+        if (!finish) {
+            for (int j = 0; j < k_steps; j++) {
+                if (j > 0 && (rc = move_surface(&c, j * def->dt, err)))
+                    goto done;
+                if ((rc = dem_step_surface(w, err)))
+                    goto done;
+                const double *fn = dem_surface_node_forces(w);
+                for (size_t q = 0; q < m; q++)
+                    c.f_sum[q] += fn[q];
+                dem_surface_total tt;
+                dem_surface_totals(w, &tt);
+                for (int a = 0; a < 3; a++) {
+                    acc.force[a] += tt.force[a];
+                    acc.moment[a] += tt.moment[a];
+                }
+                acc.traction_pos += tt.traction_pos;
+                acc.traction_neg += tt.traction_neg;
+                acc.contacts += tt.contacts;
+                if (j < k_steps - 1 && (rc = dem_step_grains(w, err)))
+                    goto done;
+            }
+        }
+        /* Post the interval's mean forces first, then do the grain work. */
+        ipc_frame_head *out;
+        double *p;
+        if ((rc = ipc_send_begin(c.ch, &out, &p)))
+            break;
+        out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
+        out->time = time;
+        if (!finish) {
+            double inv = 1.0 / k_steps;
+            for (size_t q = 0; q < m; q++) {
+                p[q] = c.f_sum[q] * inv;
+                c.w_dem += p[q] * c.v[q] * interval; /* power of the forces on the moving surface */
+            }
+            for (int a = 0; a < 3; a++) {
+                out->info[IPC_INFO_FORCE_X + a] = acc.force[a] * inv;
+                out->info[IPC_INFO_MOMENT_X + a] = acc.moment[a] * inv;
+            }
+            out->info[IPC_INFO_TRACTION_POS] = acc.traction_pos * inv;
+            out->info[IPC_INFO_TRACTION_NEG] = acc.traction_neg * inv;
+            out->info[IPC_INFO_CONTACTS] = acc.contacts * inv;
+            out->info[IPC_INFO_DEM_WORK] = c.w_dem;
+            out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
+        }
+        if ((rc = ipc_send_commit(c.ch)))
+            break;
+        if (!finish && (rc = dem_step_grains(w, err)))
+            goto done;
+
+        const ipc_frame_head *in;
+        const double *q;
+        if ((rc = ipc_recv(c.ch, &in, &q)))
+            break;
+        uint32_t kind = in->kind;
+        stop_requested |= (in->flags & IPC_FLAG_STOP_REQUEST) != 0;
+        if (kind == IPC_FRAME_DATA) {
+            memcpy(c.x, q, m * sizeof *c.x);
+            memcpy(c.v, q + m, m * sizeof *c.v);
+        }
+        ipc_recv_release(c.ch);
+        if (kind == IPC_FRAME_FINISH)
+            break;
+        if (!(kind == IPC_FRAME_DATA)) {
+            rc = cm_fail(err, DEM_COUPLED_PEER, "unexpected frame kind %u from fem_server at exchange %ld", kind, n);
+            goto done;
+        }
+        if ((rc = dem_surface_update(w, c.x, c.v, err)))
+            goto done;
+        time += interval;
+
+        if (hooks && hooks->after_exchange && (rc = hooks->after_exchange(w, hooks->user, n, err)))
+            goto done;
+        double now = cm_now();
+        if (def->progress_every > 0 && now - last_progress >= def->progress_every) {
+            last_progress = now;
+            dem_stats st;
+            dem_world_stats(w, &st);
+            double steps = (double)(n + 1) * k_steps;
+            cm_log_info("t = %.4f s  %.0f steps/s (%.2f M grain-steps/s)  grains %d  surface contacts %.0f", time,
+                        steps / (now - t_start), 1e-6 * steps * st.grains / (now - t_start), st.grains,
+                        acc.contacts / (double)k_steps);
+        }
+    }
+    if (rc) {
+        /* The exchange failed: the message names the peer and the step. */
+        rc = cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_error(c.ch));
+        goto done;
+    }
+    ipc_stats st = ipc_get_stats(c.ch);
+    cm_log_info("coupled run finished: %ld exchanges, t = %.4f s; waited for the FEM %.1f s of %.1f s; interface "
+                "work seen by the DEM %.6g J",
+                n, time, st.wait_recv_s + st.wait_send_s, cm_now() - t_start, c.w_dem);
+done:
+    if (rc && c.ch && rc != DEM_COUPLED_PEER)
+        ipc_fail(c.ch, "dem_server: %s", err->msg);
+    ipc_close(&c.ch, rc ? IPC_ERR_PEER_FAILED : IPC_OK);
+    coupled_free(&c);
+    return rc;
+}

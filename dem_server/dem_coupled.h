@@ -1,0 +1,35 @@
+/* dem_server's coupled mode: the DEM side of the exchange protocol
+ * (ipc/PROTOCOL.md) around a dem_world that already holds its grains. */
+#ifndef DEM_COUPLED_H
+#define DEM_COUPLED_H
+
+#include <signal.h>
+
+#include "dem.h"
+
+/* Status returned when the exchange or the peer failed (exit code 3). */
+#define DEM_COUPLED_PEER (-100)
+
+typedef struct dem_coupled_def {
+    const char *shm;        /* segment name chosen by the launcher */
+    double dt;              /* s, DEM step (coupling.dt) */
+    int exchange_every;     /* DEM steps per exchange */
+    double end_time;        /* s, the run ends here (or when the FEM asks) */
+    double stall_timeout;   /* s, see ipc.h */
+    double connect_timeout; /* s */
+    double progress_every;  /* s of wall time between progress lines; 0 = none */
+    int surface_material;   /* material index of the tire surface */
+    double bed_height;      /* m, undisturbed bed surface, sent for sinkage (0 = none) */
+    volatile sig_atomic_t *stop_flag;
+} dem_coupled_def;
+
+typedef struct dem_coupled_hooks {
+    /* Called after every exchange (output, diagnostics); nonzero stops the run. */
+    int (*after_exchange)(dem_world *w, void *user, long exchange, cm_error *err);
+    void *user;
+} dem_coupled_hooks;
+
+/* Runs until def->end_time or until fem_server asks to stop. */
+int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks *hooks, cm_error *err);
+
+#endif

@@ -1,0 +1,92 @@
+#include "drive.h"
+
+#include <math.h>
+#include <string.h>
+
+drive_def drive_def_default(void)
+{
+    drive_def d;
+    memset(&d, 0, sizeof d);
+    d.radius = 0.272;
+    d.sink_velocity = 0.1;
+    d.target_load = 5000.0;
+    d.max_sink = 0.2;
+    d.slip = 0.05;
+    d.omega = 1.8;
+    d.travel_distance = 1.0;
+    return d;
+}
+
+int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
+{
+    int rc;
+    if ((rc = cm_scene_doubles(s, "wheel.center", 3, -1e3, 1e3, d->center, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.start_gap", 0.0, 1.0, d->start_gap, &d->start_gap, err)) ||
+        (rc = cm_scene_double(s, "wheel.radius", 1e-3, 10.0, &d->radius, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.sink_velocity", 1e-6, 10.0, d->sink_velocity, &d->sink_velocity, err)) ||
+        (rc = cm_scene_double(s, "wheel.target_load", 0.0, 1e7, &d->target_load, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.max_sink", 1e-4, 10.0, d->max_sink, &d->max_sink, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.slip", -0.95, 0.95, d->slip, &d->slip, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.omega", 1e-6, 1e3, d->omega, &d->omega, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.travel_distance", 0.0, 1e3, d->travel_distance, &d->travel_distance,
+                                  err)))
+        return rc;
+    return CM_OK;
+}
+
+void drive_start(const drive_def *d, drive_state *s)
+{
+    memset(s, 0, sizeof *s);
+    memcpy(s->center, d->center, sizeof s->center);
+    s->phase = DRIVE_SINK;
+}
+
+double drive_travel_velocity(double omega, double radius, double slip)
+{
+    double wr = omega * radius;
+    return slip >= 0 ? wr * (1.0 - slip) : wr / (1.0 + slip);
+}
+
+double drive_slip(double omega, double radius, double v)
+{
+    double wr = omega * radius;
+    if (v <= wr)
+        return wr > 0 ? (wr - v) / wr : 0.0;
+    return v > 0 ? (wr - v) / v : 0.0;
+}
+
+int drive_update(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
+{
+    /* 1. Move by the motion held during the interval just computed. */
+    for (int k = 0; k < 3; k++)
+        s->center[k] += s->velocity[k] * dt;
+    s->angle += s->omega * dt;
+    if (s->phase == DRIVE_SINK)
+        s->sunk -= s->velocity[2] * dt;
+    else if (s->phase == DRIVE_TRAVEL)
+        s->travelled += s->velocity[0] * dt;
+
+    /* 2. Phase changes, from what the last interval measured. */
+    if (s->phase == DRIVE_SINK && load >= d->target_load) {
+        s->phase = DRIVE_TRAVEL;
+        s->t_phase = time;
+    } else if (s->phase == DRIVE_SINK && s->sunk > d->max_sink) {
+        return cm_fail(err, CM_ERR_NUMERIC,
+                       "wheel sank %.3f m (wheel.max_sink) without reaching wheel.target_load = %g N (load %g N)",
+                       s->sunk, d->target_load, load);
+    } else if (s->phase == DRIVE_TRAVEL && s->travelled >= d->travel_distance) {
+        s->phase = DRIVE_DONE;
+        s->t_phase = time;
+    }
+
+    /* 3. The motion for the next interval. */
+    memset(s->velocity, 0, sizeof s->velocity);
+    s->omega = 0.0;
+    if (s->phase == DRIVE_SINK) {
+        s->velocity[2] = -d->sink_velocity;
+    } else if (s->phase == DRIVE_TRAVEL) {
+        s->omega = d->omega;
+        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, d->slip);
+    }
+    return CM_OK;
+}

@@ -1,0 +1,62 @@
+/* drive: the wheel's prescribed motion in the two phases of the tire test
+ * (paper fig. 13): sinkage at constant velocity until the vertical contact
+ * force reaches the target load, then travel at a prescribed slip.
+ *
+ * Frame: travel along +x, axle along +y, gravity along -z. Rolling forward
+ * means angular velocity +omega about +y (the lowest point then moves at
+ * v - omega R relative to the centre's velocity v).
+ *
+ * Slip (PHYSICS_NOTES, Wong): driving s = (omega R - v) / (omega R) in [0, 1);
+ * braking s = (omega R - v) / v in (-1, 0), so both stay within [-1, 1].
+ * Here omega is prescribed and v follows from s. */
+#ifndef FEM_DRIVE_H
+#define FEM_DRIVE_H
+
+#include "error.h"
+#include "scene.h"
+
+typedef enum drive_phase { DRIVE_SINK = 0, DRIVE_TRAVEL = 1, DRIVE_DONE = 2 } drive_phase;
+
+typedef struct drive_def {
+    double center[3];        /* m, initial wheel centre (world) */
+    double start_gap;        /* m, > 0: lower the wheel to this gap above the bed
+                                surface reported by the DEM before sinking; 0 = keep centre */
+    double radius;           /* m, rolling radius R_T used for slip (tire outer radius) */
+    double sink_velocity;    /* m/s, downward speed in the sinkage phase (table 1: 0.1) */
+    double target_load;      /* N, vertical contact force that ends the sinkage phase */
+    double max_sink;         /* m, fail if the load is not reached after sinking this far */
+    double slip;             /* (-1, 1): the prescribed slip in the travel phase */
+    double omega;            /* rad/s, > 0: wheel angular speed in the travel phase */
+    double travel_distance;  /* m, the travel phase ends after this distance */
+} drive_def;
+
+drive_def drive_def_default(void);
+/* Reads the `wheel = { ... }` section. */
+int drive_config_read(cm_scene *s, drive_def *d, cm_error *err);
+
+typedef struct drive_state {
+    drive_phase phase;
+    double center[3];   /* m */
+    double velocity[3]; /* m/s, held during the next interval */
+    double omega;       /* rad/s about +y, held during the next interval */
+    double angle;       /* rad, accumulated rotation */
+    double sunk;        /* m, distance moved down in the sinkage phase */
+    double travelled;   /* m, distance moved along x in the travel phase */
+    double t_phase;     /* s, when the current phase began */
+} drive_state;
+
+void drive_start(const drive_def *d, drive_state *s);
+
+/* Travel velocity for the prescribed slip: v = omega R (1 - s) when driving,
+ * v = omega R / (1 + s) when braking. */
+double drive_travel_velocity(double omega, double radius, double slip);
+/* The slip actually realised by v and omega (same definitions). */
+double drive_slip(double omega, double radius, double v);
+
+/* Decides the motion for the next interval from the vertical contact force
+ * (N, upward on the tire) measured over the last one, and advances the
+ * kinematic state by dt at the motion held during it. Returns CM_ERR_NUMERIC
+ * when the sinkage phase went max_sink down without reaching the load. */
+int drive_update(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err);
+
+#endif

@@ -1,0 +1,173 @@
+/* FEM server of the DEM-FEM tire co-simulation: the public interface.
+ *
+ * A linear elastic tire (eqs. 28-34 of the XDEM-FEM paper) on linear
+ * tetrahedra. The deformation u is computed in the rim frame, where the rim
+ * nodes are fixed; the wheel as a whole moves rigidly (centre c, rotation R,
+ * velocity v_c, angular velocity omega) and world-frame positions of the
+ * interface nodes are  x = c + R (X + u),  velocities
+ *   v = v_c + omega x R (X + u) + R du/dt.
+ *
+ * Life cycle:
+ *   fem_config cfg = fem_config_default();  fem_config_read(scene, &cfg, &err);
+ *   fem_create(&cfg, &model, &err);          mesh, K (eq. 34), M (eq. 33), loads
+ *   fem_solve_static(model, &err);           K u0 = b0 (sect. 3.3), start state
+ *   loop: fem_interface_state(...)           -> DEM
+ *         fem_advance(model, f_iface, dt_exchange, &err)   <- DEM forces
+ *   fem_destroy(&model);
+ *
+ * Units: SI throughout (m, s, kg, N, Pa). Interface arrays are indexed by the
+ * compact interface node list (0..n_nodes-1), xyz interleaved, world frame. */
+#ifndef FEM_H
+#define FEM_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "error.h"
+#include "scene.h"
+
+typedef struct fem_model fem_model;
+
+typedef enum fem_mesh_type { FEM_MESH_TIRE = 0, FEM_MESH_GMSH = 1, FEM_MESH_BOX = 2 } fem_mesh_type;
+typedef enum fem_integrator {
+    FEM_INTEGRATOR_EXPLICIT = 0, /* central differences, eq. 32 (lumped M) */
+    FEM_INTEGRATOR_NEWMARK = 1,  /* average acceleration, unconditionally stable */
+    FEM_INTEGRATOR_RIGID = 2     /* no deformation: u = 0 */
+} fem_integrator;
+typedef enum fem_linear_solver { FEM_LINEAR_CHOLMOD = 0, FEM_LINEAR_CG = 1 } fem_linear_solver;
+
+/* Parametric 165/65 R13 tire. Axle along y, rolling in the x-z plane; the
+ * cross-section is a shell of thickness `wall` around a mid-line made of two
+ * vertical sidewalls (from the rim up), two shoulder arcs and a flat crown;
+ * lugs of depth `lug_depth` stand on the crown and shoulders, alternating
+ * between the two tread halves (left lugs in the right half's grooves),
+ * separated by a centre groove one cell wide on each side of the mid-plane
+ * (without it the two halves' lugs would touch along single edges). */
+typedef struct fem_tire_def {
+    double outer_radius;    /* m, lug tops on the crown: 0.544/2 = 0.272 */
+    double rim_radius;      /* m, 13 in / 2 = 0.1651 */
+    double width;           /* m, tread width over the lug tops: 0.165 */
+    double wall;            /* m, carcass thickness: 0.016 */
+    double lug_depth;       /* m, 0.015 */
+    double shoulder_radius; /* m, mid-line radius of the shoulder arcs: 0.025 */
+    int lugs;               /* lugs per tread half around the tire: 16 */
+    double lug_fraction;    /* share of a pitch a lug covers, (0,1): 0.5 */
+    double contact_depth;   /* m, outer faces whose centroid lies within this depth
+                               below outer_radius form the contact set: 0.06 */
+    double resolution;      /* 1 = paper (about 24 000 tets); cells per direction
+                               scale with it, so elements ~ resolution^2..3 */
+} fem_tire_def;
+
+fem_tire_def fem_tire_def_default(void);
+
+typedef struct fem_config {
+    fem_mesh_type mesh;
+    fem_tire_def tire;       /* mesh = tire */
+    char gmsh_path[512];     /* mesh = gmsh: .msh v4 ASCII, groups rim/cavity/contact */
+    double box_size[3];      /* m, mesh = box */
+    int box_cells[3];        /* mesh = box, cells per axis (6 tets each) */
+    double E;                /* Pa, Young's modulus: 20e6 (table 3) */
+    double nu;               /* Poisson's ratio: 0.45 */
+    double rho;              /* kg/m^3: 1100 */
+    double rayleigh_alpha;   /* 1/s, C = alpha M + beta K: 0 */
+    double rayleigh_beta;    /* s: 0 */
+    fem_integrator integrator;
+    double dt;               /* s, largest FEM sub-step */
+    bool allow_unstable;     /* explicit: accept dt above the computed limit */
+    fem_linear_solver static_solver;
+    double cg_tol;           /* relative residual for CG: 1e-10 */
+    int cg_max_iter;         /* 0: 10 * unknowns */
+    double pressure;         /* Pa, inflation pressure on the cavity: 0.14e6 */
+    double gravity[3];       /* m/s^2, world frame: (0,0,-9.81) */
+    int power_iterations;    /* for the stable step: 300 */
+    char output_dir[512];    /* results folder ("" = no output) */
+    int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
+} fem_config;
+
+fem_config fem_config_default(void);
+
+/* Reads the section `fem = {...}` (keys in fem_config.c and the README of
+ * the scene format). Relative paths are resolved against the scene folder. */
+int fem_config_read(cm_scene *s, fem_config *cfg, cm_error *err);
+
+int fem_create(const fem_config *cfg, fem_model **out, cm_error *err);
+void fem_destroy(fem_model **m);
+
+/* Solves K u0 = b0 (pressure + gravity, no DEM forces) with the configured
+ * solver and makes it the start state (v = 0). */
+int fem_solve_static(fem_model *m, cm_error *err);
+
+/* ---- Interface to the DEM ---------------------------------------------- */
+
+int fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris);
+/* Reference positions (rim frame, undeformed) of the interface nodes,
+ * triangles as index triples into that list (outward, counter-clockwise
+ * seen from outside), unit outward normals per triangle. Any output may be
+ * NULL. Sizes: x 3*n_nodes, tris 3*n_tris, normals 3*n_tris. */
+int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
+/* Mesh node ids of the interface nodes (n_nodes entries). */
+int fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
+/* World-frame positions and velocities now (either may be NULL). */
+int fem_interface_state(const fem_model *m, double *x, double *v);
+
+/* ---- Wheel (rigid) motion ---------------------------------------------- */
+
+typedef struct fem_wheel {
+    double center[3];   /* m, world position of the rim-frame origin */
+    double R[9];        /* rotation rim -> world, row-major */
+    double v_center[3]; /* m/s */
+    double omega[3];    /* rad/s, world frame */
+} fem_wheel;
+
+/* Sets the rigid motion; fem_advance then moves it with constant v_center
+ * and omega. The default is the identity at the origin, at rest. */
+int fem_set_wheel(fem_model *m, const fem_wheel *w, cm_error *err);
+void fem_get_wheel(const fem_model *m, fem_wheel *w);
+
+/* ---- Time stepping ----------------------------------------------------- */
+
+/* Advances by `interval` [s] in n = ceil(interval / dt) equal sub-steps,
+ * holding the external interface forces f_iface (3 per interface node,
+ * world frame, N; NULL = none) constant. */
+int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *err);
+
+double fem_time(const fem_model *m);
+
+typedef struct fem_stability {
+    double dt_estimate; /* s, h_min / c_d: the usual estimate, not a bound */
+    double dt_power;    /* s, 2/omega_max, omega_max^2 from power iteration on
+                           M^-1 K (converges from below: a slight overestimate) */
+    double dt_gershgorin; /* s, 2/sqrt(max_i sum_j |K_ij| / m_i): a rigorous lower
+                             bound of the limit, pessimistic */
+    double dt_limit;    /* s, the limit applied: dt_power reduced for damping */
+    int power_iterations_done;
+    double h_min;       /* m, smallest element altitude */
+    double wave_speed;  /* m/s, dilatational c_d = sqrt((lambda+2mu)/rho) */
+} fem_stability;
+
+int fem_get_stability(const fem_model *m, fem_stability *s);
+
+/* ---- Results ----------------------------------------------------------- */
+
+typedef struct fem_energy {
+    double elastic;  /* J, 1/2 u^T K u (deformation) */
+    double kinetic;  /* J, 1/2 du^T M du (deformation velocity, rim frame) */
+    double load_potential; /* J, -b^T u for the current loads */
+} fem_energy;
+
+void fem_get_energy(const fem_model *m, fem_energy *e);
+
+/* Force [N] and torque [N m] about the wheel centre that the rim exerts on
+ * the tire, world frame: (K u + C v + M a - f) summed over the rim nodes.
+ * The load on the axle is its negative. */
+void fem_rim_reaction(const fem_model *m, double force[3], double torque[3]);
+
+/* Mesh sizes, and the node displacements in the rim frame (3 per node). */
+void fem_mesh_size(const fem_model *m, int *n_nodes, int *n_tets);
+const double *fem_displacement(const fem_model *m);
+
+/* Writes a snapshot (deformed mesh, u, strain, stress incl. e22 and e33)
+ * now, whatever output_every says. No-op without an output folder. */
+int fem_write_snapshot(fem_model *m, cm_error *err);
+
+#endif

@@ -1,0 +1,144 @@
+/* Scene section `fem = {...}`. Keys (SI units):
+ *
+ *   mesh = {
+ *     type = "tire" | "gmsh" | "box";
+ *     # tire (all optional; defaults = the paper's 165/65 R13, fem.h):
+ *     resolution = 1.0;        # 1: ~24 000 tets; 0.25: ~1 500
+ *     outer_radius = 0.272;    # m, lug tops
+ *     rim_radius = 0.1651;     # m
+ *     width = 0.165;           # m, tread width over the lugs
+ *     wall = 0.016;            # m
+ *     lug_depth = 0.015;       # m
+ *     shoulder_radius = 0.025; # m
+ *     lugs = 16;               # per tread half, alternating halves
+ *     lug_fraction = 0.5;      # share of the pitch under a lug
+ *     contact_depth = 0.06;    # m, contact set = outer faces within this of outer_radius
+ *     # gmsh:
+ *     file = "tire.msh";       # relative to the scene folder; groups rim, cavity, contact
+ *     # box (tests, demos): rim x=0, cavity z=0, contact z=top
+ *     size = [1.0, 0.1, 0.1];  # m
+ *     cells = [20, 2, 2];
+ *   };
+ *   material = { E = 20.0e6; nu = 0.45; rho = 1100.0;     # Pa, -, kg/m^3 (table 3)
+ *                rayleigh_alpha = 0.0; rayleigh_beta = 0.0; };  # 1/s, s (optional)
+ *   integrator = "explicit" | "newmark" | "rigid";
+ *   dt = 1.0e-5;                # s, largest sub-step
+ *   allow_unstable = false;     # explicit: accept dt above the computed limit
+ *   static_solver = "cholmod";  # or "cg" (Jacobi-preconditioned)
+ *   cg_tol = 1e-10;  cg_max_iter = 0;   # 0: 10 x unknowns
+ *   pressure = 0.14e6;          # Pa, inflation (table 2)
+ *   gravity = [0.0, 0.0, -9.81];# m/s^2, world frame
+ *   power_iterations = 300;     # stable-step estimate
+ *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
+ */
+#include <stdio.h>
+#include <string.h>
+
+#include "fem.h"
+
+fem_config fem_config_default(void)
+{
+    fem_config c;
+    memset(&c, 0, sizeof c);
+    c.mesh = FEM_MESH_TIRE;
+    c.tire = fem_tire_def_default();
+    c.box_size[0] = 1.0;
+    c.box_size[1] = c.box_size[2] = 0.1;
+    c.box_cells[0] = 10;
+    c.box_cells[1] = c.box_cells[2] = 1;
+    c.E = 20.0e6;
+    c.nu = 0.45;
+    c.rho = 1100.0;
+    c.integrator = FEM_INTEGRATOR_EXPLICIT;
+    c.dt = 1.0e-5;
+    c.static_solver = FEM_LINEAR_CHOLMOD;
+    c.cg_tol = 1e-10;
+    c.pressure = 0.14e6;
+    c.gravity[2] = -9.81;
+    c.power_iterations = 300;
+    return c;
+}
+
+#define TRY(call)                                                                                         \
+    do {                                                                                                  \
+        int rc_ = (call);                                                                                 \
+        if (rc_)                                                                                          \
+            return rc_;                                                                                   \
+    } while (0)
+
+static int read_int_opt(cm_scene *s, const char *path, long lo, long hi, int def, int *out, cm_error *err)
+{
+    long v;
+    TRY(cm_scene_int_opt(s, path, lo, hi, def, &v, err));
+    *out = (int)v;
+    return CM_OK;
+}
+
+int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
+{
+    static const char *const mesh_types[] = {"tire", "gmsh", "box", NULL};
+    static const char *const integrators[] = {"explicit", "newmark", "rigid", NULL};
+    static const char *const solvers[] = {"cholmod", "cg", NULL};
+    int k;
+    TRY(cm_scene_choice(s, "fem.mesh.type", mesh_types, &k, err));
+    c->mesh = (fem_mesh_type)k;
+    if (c->mesh == FEM_MESH_TIRE) {
+        fem_tire_def d = fem_tire_def_default(), *t = &c->tire;
+        TRY(cm_scene_double_opt(s, "fem.mesh.resolution", 0.05, 16.0, d.resolution, &t->resolution, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.outer_radius", 0.01, 10.0, d.outer_radius, &t->outer_radius, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.rim_radius", 0.001, 10.0, d.rim_radius, &t->rim_radius, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.width", 0.001, 10.0, d.width, &t->width, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.wall", 1e-4, 1.0, d.wall, &t->wall, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.lug_depth", 0.0, 1.0, d.lug_depth, &t->lug_depth, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.shoulder_radius", 1e-4, 1.0, d.shoulder_radius, &t->shoulder_radius,
+                                err));
+        TRY(read_int_opt(s, "fem.mesh.lugs", 1, 1000, d.lugs, &t->lugs, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.lug_fraction", 0.01, 0.99, d.lug_fraction, &t->lug_fraction, err));
+        TRY(cm_scene_double_opt(s, "fem.mesh.contact_depth", 0.0, 10.0, d.contact_depth, &t->contact_depth, err));
+    } else if (c->mesh == FEM_MESH_GMSH) {
+        char file[512];
+        TRY(cm_scene_string(s, "fem.mesh.file", file, sizeof file, err));
+        const char *dir = cm_scene_dir(s);
+        if (file[0] == '/' || !dir || !dir[0])
+            snprintf(c->gmsh_path, sizeof c->gmsh_path, "%s", file);
+        else if ((size_t)snprintf(c->gmsh_path, sizeof c->gmsh_path, "%s/%s", dir, file) >= sizeof c->gmsh_path)
+            return cm_fail(err, CM_ERR_RANGE, "%s: fem.mesh.file: path too long", cm_scene_path(s));
+    } else {
+        double cells[3];
+        TRY(cm_scene_doubles(s, "fem.mesh.size", 3, 1e-6, 1e3, c->box_size, err));
+        TRY(cm_scene_doubles(s, "fem.mesh.cells", 3, 1, 1000, cells, err));
+        for (int a = 0; a < 3; a++) {
+            if (cells[a] != (double)(int)cells[a])
+                return cm_fail(err, CM_ERR_RANGE, "%s: fem.mesh.cells: whole numbers expected", cm_scene_path(s));
+            c->box_cells[a] = (int)cells[a];
+        }
+    }
+    TRY(cm_scene_double(s, "fem.material.E", 1.0, 1e13, &c->E, err));
+    TRY(cm_scene_double(s, "fem.material.nu", -0.99, 0.4999, &c->nu, err));
+    TRY(cm_scene_double(s, "fem.material.rho", 1e-3, 1e5, &c->rho, err));
+    TRY(cm_scene_double_opt(s, "fem.material.rayleigh_alpha", 0.0, 1e6, 0.0, &c->rayleigh_alpha, err));
+    TRY(cm_scene_double_opt(s, "fem.material.rayleigh_beta", 0.0, 1.0, 0.0, &c->rayleigh_beta, err));
+    TRY(cm_scene_choice(s, "fem.integrator", integrators, &k, err));
+    c->integrator = (fem_integrator)k;
+    TRY(cm_scene_double(s, "fem.dt", 1e-12, 1.0, &c->dt, err));
+    TRY(cm_scene_bool_opt(s, "fem.allow_unstable", false, &c->allow_unstable, err));
+    TRY(cm_scene_choice_opt(s, "fem.static_solver", solvers, FEM_LINEAR_CHOLMOD, &k, err));
+    c->static_solver = (fem_linear_solver)k;
+    TRY(cm_scene_double_opt(s, "fem.cg_tol", 1e-16, 1e-1, 1e-10, &c->cg_tol, err));
+    TRY(read_int_opt(s, "fem.cg_max_iter", 0, 100000000, 0, &c->cg_max_iter, err));
+    TRY(cm_scene_double_opt(s, "fem.pressure", 0.0, 1e9, 0.14e6, &c->pressure, err));
+    static const double g0[3] = {0.0, 0.0, -9.81};
+    TRY(cm_scene_doubles_opt(s, "fem.gravity", 3, -1e3, 1e3, g0, c->gravity, err));
+    TRY(read_int_opt(s, "fem.power_iterations", 1, 1000000, 300, &c->power_iterations, err));
+    char dir[512];
+    TRY(cm_scene_string_opt(s, "fem.output.dir", "", dir, sizeof dir, err));
+    if (dir[0] && dir[0] != '/' && cm_scene_dir(s) && cm_scene_dir(s)[0]) {
+        if ((size_t)snprintf(c->output_dir, sizeof c->output_dir, "%s/%s", cm_scene_dir(s), dir) >=
+            sizeof c->output_dir)
+            return cm_fail(err, CM_ERR_RANGE, "%s: fem.output.dir: path too long", cm_scene_path(s));
+    } else {
+        snprintf(c->output_dir, sizeof c->output_dir, "%s", dir);
+    }
+    TRY(read_int_opt(s, "fem.output.every", 0, 1000000000, 0, &c->output_every, err));
+    return CM_OK;
+}

@@ -1,0 +1,400 @@
+/* fem_server: the tire side of the co-simulation.
+ *
+ *   fem_server --scene FILE --shm NAME [--out DIR]
+ *
+ * Builds the tire model of the scene's `fem` section, solves the initial
+ * static state (paper sec. 3.3), creates the exchange segment and publishes
+ * the interface surface, then in lockstep with dem_server: receives the
+ * interface forces of exchange n, moves the wheel as the `wheel` section
+ * prescribes (sinkage, then travel at slip), advances the deformation over
+ * the interval and answers the new interface positions and velocities.
+ * Records traction, load, sinkage and energies every exchange and prints the
+ * traction summary over the detected steady part at the end. */
+#include <errno.h>
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "drive.h"
+#include "fem.h"
+#include "h5io.h"
+#include "ipc.h"
+#include "log.h"
+#include "runcfg.h"
+#include "steady.h"
+#include "timer.h"
+
+static volatile sig_atomic_t g_stop;
+static void on_signal(int sig) { g_stop = sig; }
+
+typedef struct options {
+    const char *scene, *shm, *out;
+} options;
+
+/* Columns of the time series (fem.h5:/series and traction.csv). */
+enum {
+    COL_T, COL_PHASE, COL_X, COL_Z, COL_ANGLE, COL_OMEGA, COL_V, COL_SLIP, COL_FX, COL_FY, COL_FZ, COL_MY,
+    COL_TH, COL_TR, COL_TP, COL_CONTACTS, COL_SINKAGE, COL_E_EL, COL_E_KIN, COL_W_DEM, COL_W_FEM, NCOL
+};
+static const char *const k_columns[NCOL] = {
+    "t", "phase", "x", "z", "angle", "omega", "v", "slip", "Fx", "Fy", "Fz", "My",
+    "T_H", "T_R", "T_P", "contacts", "sinkage", "E_elastic", "E_kinetic", "W_dem", "W_fem"};
+
+typedef struct series_buf {
+    double *th, *tr, *tp, *sink;
+    size_t n, cap;
+} series_buf;
+
+static int series_push(series_buf *b, double th, double tr, double tp, double sink)
+{
+    if (b->n == b->cap) {
+        size_t cap = b->cap ? 2 * b->cap : 4096;
+        double *p[4] = {realloc(b->th, cap * sizeof(double)), NULL, NULL, NULL};
+        if (!p[0])
+            return -1;
+        b->th = p[0];
+        if (!(p[1] = realloc(b->tr, cap * sizeof(double))))
+            return -1;
+        b->tr = p[1];
+        if (!(p[2] = realloc(b->tp, cap * sizeof(double))))
+            return -1;
+        b->tp = p[2];
+        if (!(p[3] = realloc(b->sink, cap * sizeof(double))))
+            return -1;
+        b->sink = p[3];
+        b->cap = cap;
+    }
+    b->th[b->n] = th;
+    b->tr[b->n] = tr;
+    b->tp[b->n] = tp;
+    b->sink[b->n] = sink;
+    b->n++;
+    return 0;
+}
+
+static void series_free(series_buf *b)
+{
+    free(b->th);
+    free(b->tr);
+    free(b->tp);
+    free(b->sink);
+}
+
+static void rotation_about_y(double angle, double R[9])
+{
+    double c = cos(angle), s = sin(angle);
+    const double r[9] = {c, 0, s, 0, 1, 0, -s, 0, c};
+    memcpy(R, r, sizeof r);
+}
+
+static int set_wheel(fem_model *m, const drive_state *ds, cm_error *err)
+{
+    fem_wheel w;
+    memset(&w, 0, sizeof w);
+    memcpy(w.center, ds->center, sizeof w.center);
+    rotation_about_y(ds->angle, w.R);
+    memcpy(w.v_center, ds->velocity, sizeof w.v_center);
+    w.omega[1] = ds->omega;
+    return fem_set_wheel(m, &w, err);
+}
+
+static void print_summary_line(const char *name, const double *x, size_t n, size_t start)
+{
+    steady_stats st;
+    steady_summary(x, n, start, &st);
+    cm_log_info("  %-4s mean %9.2f N  (95%% CI +-%7.2f N, %d batches)  min %9.2f  max %9.2f", name, st.mean,
+                st.half_width, st.batches, st.min, st.max);
+}
+
+static int run(const options *o)
+{
+    cm_error err = {0};
+    cm_scene *scene = NULL;
+    fem_model *model = NULL;
+    ipc_channel *ch = NULL;
+    cm_h5 *h5 = NULL;
+    cm_h5_series *series = NULL;
+    double *x_prev = NULL, *x_now = NULL, *v_now = NULL;
+    series_buf travel = {0};
+    int exit_code = 1, rc;
+
+    cm_run_config rc_cfg;
+    drive_def drive = drive_def_default();
+    fem_config cfg = fem_config_default();
+    if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) ||
+        (rc = drive_config_read(scene, &drive, &err)) || (rc = fem_config_read(scene, &cfg, &err)))
+        goto fail;
+    cm_scene_mark_known(scene, "dem");
+    static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
+    if ((rc = cm_scene_check_unknown(scene, sections, &err)))
+        goto fail;
+    snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
+
+    double t0 = cm_now();
+    if ((rc = fem_create(&cfg, &model, &err)))
+        goto fail;
+    int n_mesh_nodes, n_tets;
+    fem_mesh_size(model, &n_mesh_nodes, &n_tets);
+    if ((rc = fem_solve_static(model, &err)))
+        goto fail;
+    fem_stability stab;
+    fem_get_stability(model, &stab);
+    cm_log_info("tire: %d nodes, %d tetrahedra; static solve done in %.2f s; FEM step limit %.3g s "
+                "(estimate h/c %.3g s)",
+                n_mesh_nodes, n_tets, cm_now() - t0, stab.dt_limit, stab.dt_estimate);
+
+    drive_state ds;
+    drive_start(&drive, &ds);
+    if ((rc = set_wheel(model, &ds, &err)))
+        goto fail;
+
+    /* The exchange segment, sized for the interface surface. */
+    uint32_t nn, nt;
+    fem_interface_count(model, &nn, &nt);
+    ipc_create_def def = ipc_default_create_def();
+    def.n_nodes = nn;
+    def.n_tris = nt;
+    def.exchange_dt = cm_run_exchange_dt(&rc_cfg);
+    def.stall_timeout = rc_cfg.stall_timeout;
+    def.connect_timeout = rc_cfg.connect_timeout;
+    def.stop_flag = &g_stop;
+    char ipc_err[512];
+    if ((rc = ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err))) {
+        cm_log_error("%s", ipc_err);
+        exit_code = 3;
+        goto cleanup;
+    }
+    x_prev = malloc(3 * (size_t)nn * sizeof(double));
+    x_now = malloc(3 * (size_t)nn * sizeof(double));
+    v_now = malloc(3 * (size_t)nn * sizeof(double));
+    if (!x_prev || !x_now || !v_now) {
+        cm_fail(&err, CM_ERR_NOMEM, "out of memory for %u interface nodes", nn);
+        goto fail;
+    }
+    fem_interface_state(model, ipc_surface_nodes(ch), NULL);
+    fem_interface_initial(model, NULL, ipc_surface_tris(ch), NULL);
+    memcpy(x_prev, ipc_surface_nodes(ch), 3 * (size_t)nn * sizeof(double));
+    cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", nn, nt, o->shm);
+    if ((rc = ipc_accept(ch))) {
+        cm_log_error("%s", ipc_error(ch));
+        exit_code = 3;
+        goto cleanup;
+    }
+
+    /* Outputs. */
+    char path[1200], csv[1200];
+    snprintf(path, sizeof path, "%s/wheel.h5", o->out);
+    snprintf(csv, sizeof csv, "%s/traction.csv", o->out);
+    cm_h5_def hdef = cm_h5_default_def();
+    if ((rc = cm_h5_create(path, &hdef, &h5, &err)) ||
+        (rc = cm_h5_series_create(h5, "/series", k_columns, NCOL, csv, &series, &err)))
+        goto fail;
+
+    const double interval = cm_run_exchange_dt(&rc_cfg);
+    double w_fem = 0, max_force_mismatch = 0, max_moment_mismatch = 0;
+    double last_progress = cm_now(), loop_t0 = cm_now();
+    long n = 0;
+    int finished = 0;
+    for (;; n++) {
+        const ipc_frame_head *in;
+        const double *f;
+        if ((rc = ipc_recv(ch, &in, &f)))
+            break;
+        if (in->kind == IPC_FRAME_FINISH) {
+            ipc_recv_release(ch);
+            ipc_frame_head *out;
+            double *p;
+            if ((rc = ipc_send_begin(ch, &out, &p)))
+                break;
+            out->kind = IPC_FRAME_FINISH;
+            rc = ipc_send_commit(ch);
+            finished = 1;
+            break;
+        }
+        double time = in->time, info[IPC_INFO_LEN];
+        memcpy(info, in->info, sizeof info);
+
+        /* Conservation: nodal forces against the contact totals (eq. 42 keeps
+         * resultant and moment); positions are those the DEM saw, moments
+         * about the world origin as the protocol defines them. */
+        double fs[3] = {0}, ms[3] = {0};
+        for (uint32_t i = 0; i < nn; i++) {
+            const double *fi = f + 3 * i, *r = x_prev + 3 * i;
+            fs[0] += fi[0], fs[1] += fi[1], fs[2] += fi[2];
+            ms[0] += r[1] * fi[2] - r[2] * fi[1];
+            ms[1] += r[2] * fi[0] - r[0] * fi[2];
+            ms[2] += r[0] * fi[1] - r[1] * fi[0];
+        }
+        double fscale = 1e-9 + fabs(info[IPC_INFO_FORCE_X]) + fabs(info[IPC_INFO_FORCE_Y]) +
+                        fabs(info[IPC_INFO_FORCE_Z]);
+        for (int k = 0; k < 3; k++) {
+            double df = fabs(fs[k] - info[IPC_INFO_FORCE_X + k]) / fscale;
+            double dm = fabs(ms[k] - info[IPC_INFO_MOMENT_X + k]) / (fscale * drive.radius);
+            max_force_mismatch = df > max_force_mismatch ? df : max_force_mismatch;
+            max_moment_mismatch = dm > max_moment_mismatch ? dm : max_moment_mismatch;
+        }
+
+        /* Gentle placement: at the first exchange, lower the wheel to the
+         * requested gap above the bed before the sinkage phase starts. */
+        double bed = info[IPC_INFO_BED_HEIGHT];
+        if (n == 0 && drive.start_gap > 0 && bed != 0) {
+            ds.center[2] = bed + drive.radius + drive.start_gap;
+            cm_log_info("bed surface at z = %.4f m: wheel placed %.1f mm above it", bed, 1e3 * drive.start_gap);
+        }
+
+        /* Advance the tire over the interval with the motion decided last time. */
+        if ((rc = set_wheel(model, &ds, &err)) || (rc = fem_advance(model, f, interval, &err))) {
+            ipc_recv_release(ch);
+            goto fail;
+        }
+        ipc_recv_release(ch);
+        double load = info[IPC_INFO_FORCE_Z];
+        if ((rc = drive_update(&drive, &ds, time + interval, interval, load, &err)))
+            goto fail;
+        if ((rc = set_wheel(model, &ds, &err)))
+            goto fail;
+
+        ipc_frame_head *out;
+        double *p;
+        if ((rc = ipc_send_begin(ch, &out, &p)))
+            break;
+        fem_interface_state(model, p, p + 3 * (size_t)nn);
+        /* Work of the interface forces on the surface as the FEM moved it. */
+        for (size_t j = 0; j < 3 * (size_t)nn; j++)
+            w_fem += f[j] * (p[j] - x_prev[j]);
+        memcpy(x_prev, p, 3 * (size_t)nn * sizeof(double));
+        out->kind = IPC_FRAME_DATA;
+        out->time = time + interval;
+        memcpy(&out->info[IPC_INFO_CENTER_X], ds.center, 3 * sizeof(double));
+        memcpy(&out->info[IPC_INFO_VEL_X], ds.velocity, 3 * sizeof(double));
+        out->info[IPC_INFO_OMEGA] = ds.omega;
+        out->info[IPC_INFO_ANGLE] = ds.angle;
+        out->info[IPC_INFO_FEM_WORK] = w_fem;
+        if (ds.phase == DRIVE_DONE)
+            out->flags |= IPC_FLAG_STOP_REQUEST;
+        if ((rc = ipc_send_commit(ch)))
+            break;
+
+        /* Record. Travel is along +x: T_H pushes the tire forward. The axle
+         * torque is the grains' moment about the wheel centre, M_o - c x F. */
+        const double *c = ds.center;
+        double axle_torque = info[IPC_INFO_MOMENT_Y] - (c[2] * info[IPC_INFO_FORCE_X] - c[0] * info[IPC_INFO_FORCE_Z]);
+        fem_energy en;
+        fem_get_energy(model, &en);
+        double th = info[IPC_INFO_TRACTION_POS], tr = info[IPC_INFO_TRACTION_NEG];
+        double sinkage = bed != 0 ? bed - (ds.center[2] - drive.radius) : 0;
+        double row[NCOL] = {time + interval, ds.phase, ds.center[0], ds.center[2], ds.angle, ds.omega,
+                            ds.velocity[0], ds.phase == DRIVE_TRAVEL ? drive.slip : 0,
+                            info[IPC_INFO_FORCE_X], info[IPC_INFO_FORCE_Y], info[IPC_INFO_FORCE_Z],
+                            axle_torque, th, tr, th - fabs(tr), info[IPC_INFO_CONTACTS], sinkage,
+                            en.elastic, en.kinetic, info[IPC_INFO_DEM_WORK], w_fem};
+        if ((rc = cm_h5_series_append(series, row, &err)))
+            goto fail;
+        if (ds.phase == DRIVE_TRAVEL && series_push(&travel, th, tr, th - fabs(tr), sinkage)) {
+            cm_fail(&err, CM_ERR_NOMEM, "out of memory recording the traction series");
+            goto fail;
+        }
+        /* Tire snapshots: fem_advance writes one every fem.output.every calls. */
+
+        double now = cm_now();
+        if (rc_cfg.progress_every > 0 && now - last_progress >= rc_cfg.progress_every) {
+            last_progress = now;
+            double rate = (double)(n + 1) / (now - loop_t0);
+            double remaining = (rc_cfg.end_time - (time + interval)) / interval;
+            if (ds.phase == DRIVE_TRAVEL && ds.velocity[0] > 0) {
+                double by_travel = (drive.travel_distance - ds.travelled) / ds.velocity[0] / interval;
+                remaining = by_travel < remaining ? by_travel : remaining;
+            }
+            static const char *const phase_names[] = {"sinkage", "travel", "done"};
+            cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %5.0f s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm",
+                        phase_names[ds.phase], time + interval, rate, remaining > 0 ? remaining / rate : 0, load,
+                        th - fabs(tr), 1e3 * sinkage);
+        }
+    }
+    if (!finished) {
+        cm_log_error("%s", ipc_error(ch));
+        exit_code = g_stop ? 128 + (int)g_stop : 3;
+        goto cleanup;
+    }
+
+    ipc_stats st = ipc_get_stats(ch);
+    cm_log_info("finished: %ld exchanges in %.1f s; waited for the DEM %.1f s", n, cm_now() - loop_t0,
+                st.wait_recv_s + st.wait_send_s);
+    cm_log_info("conservation: nodal forces vs contact totals differ by at most %.2e (force) and %.2e (moment), "
+                "relative",
+                max_force_mismatch, max_moment_mismatch);
+    if (travel.n > 0) {
+        size_t start = steady_start(travel.tp, travel.n);
+        cm_log_info("traction over the steady part of the travel: from exchange %zu of %zu (t = %.3f s after "
+                    "travel began), slip %.1f %%",
+                    start, travel.n, (double)start * interval, 100 * drive.slip);
+        print_summary_line("T_H", travel.th, travel.n, start);
+        print_summary_line("T_R", travel.tr, travel.n, start);
+        print_summary_line("T_P", travel.tp, travel.n, start);
+        steady_stats sk;
+        steady_summary(travel.sink, travel.n, start, &sk);
+        cm_log_info("  sinkage mean %.1f mm (95%% CI +-%.1f mm)", 1e3 * sk.mean, 1e3 * sk.half_width);
+    } else {
+        cm_log_info("the wheel never reached the travel phase (target load %g N): no traction summary",
+                    drive.target_load);
+    }
+    cm_log_info("results: %s/traction.csv, %s/wheel.h5", o->out, o->out);
+    exit_code = 0;
+    goto cleanup;
+
+fail:
+    cm_log_error("%s", err.msg);
+    if (ch)
+        ipc_fail(ch, "fem_server: %s", err.msg);
+    exit_code = 1;
+cleanup:
+    if (h5 && cm_h5_close(&h5, &err))
+        cm_log_error("%s", err.msg);
+    ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
+    fem_destroy(&model);
+    cm_scene_close(&scene);
+    series_free(&travel);
+    free(x_prev);
+    free(x_now);
+    free(v_now);
+    return exit_code;
+}
+
+static int usage(void)
+{
+    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR]\n"
+                    "  The tire side of the co-simulation; run both servers with ./run SCENE.\n");
+    return 2;
+}
+
+int main(int argc, char **argv)
+{
+    options o = {0};
+    o.out = "out";
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--scene") == 0 && i + 1 < argc)
+            o.scene = argv[++i];
+        else if (strcmp(argv[i], "--shm") == 0 && i + 1 < argc)
+            o.shm = argv[++i];
+        else if (strcmp(argv[i], "--out") == 0 && i + 1 < argc)
+            o.out = argv[++i];
+        else
+            return usage();
+    }
+    if (!o.scene || !o.shm)
+        return usage();
+    cm_log_set_tag("fem");
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    if (mkdir(o.out, 0755) != 0 && errno != EEXIST) {
+        cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
+        return 1;
+    }
+    return run(&o);
+}

@@ -1,0 +1,46 @@
+/* The model behind the public fem_model handle: mesh, solver, loads,
+ * interface, wheel motion, output. Internal to fem/ (tests, bench). */
+#ifndef FEM_MODEL_H
+#define FEM_MODEL_H
+
+#include "fem.h"
+#include "fem_mesh.h"
+#include "fem_output.h"
+#include "fem_solver.h"
+
+struct fem_model {
+    fem_config cfg;
+    fem_mesh mesh;
+    fem_solver *s;
+    double *b_pressure;     /* consistent pressure load per dof (rim frame, constant) [N] */
+    /* DEM interface */
+    uint32_t n_if_nodes, n_if_tris;
+    uint32_t *if_nodes;     /* mesh node ids */
+    uint32_t *if_tris;      /* 3 per triangle, into if_nodes */
+    fem_wheel wheel;
+    fem_stability stab;
+    bool have_stab;
+    bool static_done;
+    long advances;
+    double max_substep;     /* s, last sub-step used */
+    double size;            /* m, bounding-box diagonal of the mesh */
+    fem_output *out;
+};
+
+/* Adds the consistent load of pressure p [Pa] on every boundary face tagged
+ * `tag`: each of its three nodes gets -p A n / 3 (n outward from the solid,
+ * so the pressure pushes into the body). */
+void fem_load_pressure(const fem_mesh *m, uint8_t tag, double p, double *f);
+
+/* Reads a Gmsh .msh v4.1 ASCII file / text (fem_gmsh.c). */
+int fem_mesh_read_gmsh(const char *path, fem_mesh *m, cm_error *err);
+int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh *m, cm_error *err);
+/* Writes a mesh as .msh v4.1 ASCII with the named sets (view it in Gmsh;
+ * rim is written as the rim faces: nodes tagged rim off those faces are lost). */
+int fem_mesh_write_gmsh(const fem_mesh *m, const char *path, cm_error *err);
+
+/* Builds the total load of the next interval into s->f: pressure + M R^T g
+ * + R^T f_iface (f_iface may be NULL). */
+void fem_model_build_load(fem_model *m, const double *f_iface);
+
+#endif

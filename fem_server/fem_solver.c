@@ -1,0 +1,560 @@
+/* Assembly (eqs. 33, 34), constraints, static solve, stable step and time
+ * integration of M u'' + C u' + K u = f (eq. 28 discretised). */
+#include "fem_solver.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fem_element.h"
+
+#ifdef _OPENMP
+#define FEM_OMP_FOR _Pragma("omp parallel for schedule(static)")
+#else
+#define FEM_OMP_FOR
+#endif
+
+static int cholmod_failed(fem_solver *s, cm_error *err, const char *what)
+{
+    return cm_fail(err, s->cc.status == CHOLMOD_OUT_OF_MEMORY ? CM_ERR_NOMEM : CM_ERR_NUMERIC,
+                   "fem solver: CHOLMOD %s failed (status %d)", what, s->cc.status);
+}
+
+int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double alpha, double beta,
+                      fem_solver **out, cm_error *err)
+{
+    *out = NULL;
+    if (!(E > 0.0) || !(nu > -1.0 && nu < 0.5) || !(rho > 0.0) || !(alpha >= 0.0) || !(beta >= 0.0))
+        return cm_fail(err, CM_ERR_RANGE, "fem solver: need E > 0, -1 < nu < 0.5, rho > 0, damping >= 0");
+    fem_solver *s = calloc(1, sizeof *s);
+    if (!s)
+        return cm_fail(err, CM_ERR_NOMEM, "fem solver: out of memory");
+    cholmod_start(&s->cc);
+    s->cc_started = true;
+    s->cc.print = 0;
+    s->n_dof = 3 * m->n_nodes;
+    fem_lame(E, nu, &s->lambda, &s->mu);
+    s->rho = rho;
+    s->alpha = alpha;
+    s->beta = beta;
+    s->integrator = FEM_INTEGRATOR_RIGID;
+    size_t n = (size_t)s->n_dof;
+    s->mass = calloc(n, sizeof(double));
+    s->inv_mass = calloc(n, sizeof(double));
+    s->fixed = calloc(n, 1);
+    s->u_fixed = calloc(n, sizeof(double));
+    s->free_dofs = malloc(n * sizeof(int32_t));
+    s->u = calloc(n, sizeof(double));
+    s->v = calloc(n, sizeof(double));
+    s->a = calloc(n, sizeof(double));
+    s->f = calloc(n, sizeof(double));
+    s->w = calloc(n, sizeof(double));
+    s->tmp = calloc(n, sizeof(double));
+    if (!s->mass || !s->inv_mass || !s->fixed || !s->u_fixed || !s->free_dofs || !s->u || !s->v || !s->a ||
+        !s->f || !s->w || !s->tmp) {
+        fem_solver_destroy(&s);
+        return cm_fail(err, CM_ERR_NOMEM, "fem solver: out of memory for %d dofs", (int)n);
+    }
+
+    /* Element loop: upper triangle of each K_e into one triplet matrix;
+     * cholmod_triplet_to_sparse sums the duplicates (the assembly). */
+    size_t nz = (size_t)m->n_tets * 78u;
+    cholmod_triplet *T = cholmod_allocate_triplet(n, n, nz, 1, CHOLMOD_REAL, &s->cc);
+    if (!T) {
+        int rc = cholmod_failed(s, err, "allocate_triplet");
+        fem_solver_destroy(&s);
+        return rc;
+    }
+    int *Ti = T->i, *Tj = T->j;
+    double *Tx = T->x;
+    size_t k = 0;
+    for (int e = 0; e < m->n_tets; e++) {
+        const int32_t *t = &m->tets[4 * e];
+        double g[4][3], Ke[12][12];
+        double V = fem_tet_gradients(&m->x[3 * t[0]], &m->x[3 * t[1]], &m->x[3 * t[2]], &m->x[3 * t[3]], g);
+        if (!(V > 0.0)) {
+            cholmod_free_triplet(&T, &s->cc);
+            fem_solver_destroy(&s);
+            return cm_fail(err, CM_ERR_NUMERIC, "%s: element %d has volume %.3g m^3", m->source, e, V);
+        }
+        fem_tet_stiffness(g, V, s->lambda, s->mu, Ke); /* eq. 34 */
+        /* eq. 33 lumped by row sums: sum_j int N_i N_j = int N_i = V/4 */
+        for (int i = 0; i < 4; i++)
+            for (int a = 0; a < 3; a++)
+                s->mass[3 * t[i] + a] += 0.25 * rho * V;
+        for (int p = 0; p < 12; p++) {
+            int gp = 3 * t[p / 3] + p % 3;
+            for (int q = p; q < 12; q++) {
+                int gq = 3 * t[q / 3] + q % 3;
+                Ti[k] = gp < gq ? gp : gq;
+                Tj[k] = gp < gq ? gq : gp;
+                Tx[k] = Ke[p][q];
+                k++;
+            }
+        }
+    }
+    T->nnz = k;
+    cholmod_sparse *Ku = cholmod_triplet_to_sparse(T, k, &s->cc);
+    cholmod_free_triplet(&T, &s->cc);
+    if (!Ku) {
+        int rc = cholmod_failed(s, err, "triplet_to_sparse");
+        fem_solver_destroy(&s);
+        return rc;
+    }
+    s->K = cholmod_copy(Ku, 0, 1, &s->cc); /* both triangles, for the row-wise product */
+    cholmod_free_sparse(&Ku, &s->cc);
+    if (!s->K) {
+        int rc = cholmod_failed(s, err, "copy");
+        fem_solver_destroy(&s);
+        return rc;
+    }
+    *out = s;
+    return fem_solver_constrain(s, s->fixed, NULL, err);
+}
+
+void fem_solver_destroy(fem_solver **ps)
+{
+    fem_solver *s = *ps;
+    if (!s)
+        return;
+    if (s->cc_started) {
+        cholmod_free_sparse(&s->K, &s->cc);
+        cholmod_free_sparse(&s->Kff, &s->cc);
+        cholmod_free_factor(&s->L, &s->cc);
+        cholmod_free_factor(&s->Leff, &s->cc);
+        cholmod_free_dense(&s->rhs, &s->cc);
+        cholmod_free_dense(&s->sol, &s->cc);
+        cholmod_free_dense(&s->Y, &s->cc);
+        cholmod_free_dense(&s->E, &s->cc);
+        cholmod_finish(&s->cc);
+    }
+    free(s->mass);
+    free(s->inv_mass);
+    free(s->fixed);
+    free(s->u_fixed);
+    free(s->free_dofs);
+    free(s->u);
+    free(s->v);
+    free(s->a);
+    free(s->f);
+    free(s->w);
+    free(s->tmp);
+    free(s);
+    *ps = NULL;
+}
+
+int fem_solver_constrain(fem_solver *s, const uint8_t *fixed, const double *values, cm_error *err)
+{
+    int n = s->n_dof;
+    if (fixed != s->fixed)
+        memcpy(s->fixed, fixed, (size_t)n);
+    s->n_free = 0;
+    for (int d = 0; d < n; d++) {
+        s->u_fixed[d] = s->fixed[d] && values ? values[d] : 0.0;
+        s->inv_mass[d] = s->fixed[d] ? 0.0 : 1.0 / s->mass[d];
+        if (!s->fixed[d])
+            s->free_dofs[s->n_free++] = d;
+    }
+    cholmod_free_sparse(&s->Kff, &s->cc);
+    cholmod_free_factor(&s->L, &s->cc);
+    cholmod_free_factor(&s->Leff, &s->cc);
+    cholmod_free_dense(&s->rhs, &s->cc);
+    cholmod_free_dense(&s->sol, &s->cc);
+    cholmod_free_dense(&s->Y, &s->cc);
+    cholmod_free_dense(&s->E, &s->cc);
+    s->h_eff = 0.0;
+    if (s->n_free == 0)
+        return cm_fail(err, CM_ERR_STATE, "fem solver: every dof is fixed");
+    cholmod_sparse *sub = cholmod_submatrix(s->K, s->free_dofs, s->n_free, s->free_dofs, s->n_free, 1, 1, &s->cc);
+    if (!sub)
+        return cholmod_failed(s, err, "submatrix");
+    s->Kff = cholmod_copy(sub, 1, 1, &s->cc); /* upper triangle, symmetric */
+    cholmod_free_sparse(&sub, &s->cc);
+    s->rhs = cholmod_zeros((size_t)s->n_free, 1, CHOLMOD_REAL, &s->cc);
+    if (!s->Kff || !s->rhs)
+        return cholmod_failed(s, err, "copy");
+    fem_solver_set_state(s, NULL, NULL);
+    return CM_OK;
+}
+
+int fem_solver_constrain_rim(fem_solver *s, const fem_mesh *m, cm_error *err)
+{
+    memset(s->fixed, 0, (size_t)s->n_dof);
+    int n_rim = 0;
+    for (int i = 0; i < m->n_nodes; i++)
+        if (m->node_tag[i] & FEM_NODE_RIM) {
+            s->fixed[3 * i] = s->fixed[3 * i + 1] = s->fixed[3 * i + 2] = 1;
+            n_rim++;
+        }
+    if (n_rim == 0)
+        return cm_fail(err, CM_ERR_STATE, "%s: no rim nodes: the stiffness matrix would be singular", m->source);
+    return fem_solver_constrain(s, s->fixed, NULL, err);
+}
+
+void fem_solver_matvec(const fem_solver *s, const double *x, double *y)
+{
+    const int *Kp = s->K->p, *Ki = s->K->i;
+    const double *Kx = s->K->x;
+    int n = s->n_dof;
+    /* K is symmetric and stored whole: column j read as row j (gather). */
+    FEM_OMP_FOR
+    for (int r = 0; r < n; r++) {
+        double acc = 0.0;
+        for (int p = Kp[r]; p < Kp[r + 1]; p++)
+            acc += Kx[p] * x[Ki[p]];
+        y[r] = acc;
+    }
+}
+
+static double dot_free(const fem_solver *s, const double *a, const double *b)
+{
+    double acc = 0.0; /* serial: the same sum for any thread count */
+    for (int k = 0; k < s->n_free; k++) {
+        int d = s->free_dofs[k];
+        acc += a[d] * b[d];
+    }
+    return acc;
+}
+
+/* Direct solve of the free block: x_f = Kff^-1 r_f (eq. of sect. 3.3). */
+static int static_cholmod(fem_solver *s, const double *r, double *du, cm_error *err)
+{
+    if (!s->L) {
+        s->L = cholmod_analyze(s->Kff, &s->cc);
+        if (!s->L)
+            return cholmod_failed(s, err, "analyze");
+        if (!cholmod_factorize(s->Kff, s->L, &s->cc) || s->cc.status != CHOLMOD_OK) {
+            int rc = cm_fail(err, CM_ERR_NUMERIC,
+                             "fem solver: K not positive definite (CHOLMOD status %d, column %d of %d): "
+                             "rigid-body mode not fixed?", s->cc.status, (int)s->L->minor, s->n_free);
+            cholmod_free_factor(&s->L, &s->cc);
+            return rc;
+        }
+    }
+    double *b = s->rhs->x;
+    for (int k = 0; k < s->n_free; k++)
+        b[k] = r[s->free_dofs[k]];
+    if (!cholmod_solve2(CHOLMOD_A, s->L, s->rhs, NULL, &s->sol, NULL, &s->Y, &s->E, &s->cc))
+        return cholmod_failed(s, err, "solve");
+    const double *x = s->sol->x;
+    memset(du, 0, (size_t)s->n_dof * sizeof *du);
+    for (int k = 0; k < s->n_free; k++)
+        du[s->free_dofs[k]] = x[k];
+    return CM_OK;
+}
+
+/* Jacobi-preconditioned conjugate gradients on the free dofs (the paper's
+ * choice, sect. 3.4). Vectors are full-length with zeros on fixed dofs. */
+static int static_cg(fem_solver *s, const double *r0, double tol, int max_iter, double *x, int *iters,
+                     cm_error *err)
+{
+    size_t n = (size_t)s->n_dof;
+    double *r = malloc(n * sizeof *r), *z = malloc(n * sizeof *z), *p = malloc(n * sizeof *p),
+           *q = malloc(n * sizeof *q), *dinv = calloc(n, sizeof *dinv);
+    int rc = CM_OK;
+    if (!r || !z || !p || !q || !dinv) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "fem solver: CG out of memory");
+        goto done;
+    }
+    const int *Kp = s->K->p, *Ki = s->K->i;
+    const double *Kx = s->K->x;
+    for (int d = 0; d < s->n_dof; d++) {
+        x[d] = 0.0;
+        r[d] = s->fixed[d] ? 0.0 : r0[d];
+        for (int k = Kp[d]; k < Kp[d + 1]; k++)
+            if (Ki[k] == d)
+                dinv[d] = s->fixed[d] ? 0.0 : 1.0 / Kx[k];
+        z[d] = dinv[d] * r[d];
+        p[d] = z[d];
+    }
+    double bnorm = sqrt(dot_free(s, r, r)), rz = dot_free(s, r, z);
+    if (max_iter <= 0)
+        max_iter = 10 * s->n_free;
+    int it = 0;
+    double rnorm = bnorm;
+    while (rnorm > tol * bnorm && it < max_iter) {
+        fem_solver_matvec(s, p, q);
+        for (int d = 0; d < s->n_dof; d++)
+            if (s->fixed[d])
+                q[d] = 0.0;
+        double pq = dot_free(s, p, q);
+        if (!(pq > 0.0)) {
+            rc = cm_fail(err, CM_ERR_NUMERIC, "fem solver: CG breakdown (p^T K p = %.3g at iteration %d): K not "
+                         "positive definite on the free dofs", pq, it);
+            goto done;
+        }
+        double al = rz / pq;
+        for (int d = 0; d < s->n_dof; d++) {
+            x[d] += al * p[d];
+            r[d] -= al * q[d];
+            z[d] = dinv[d] * r[d];
+        }
+        double rz_new = dot_free(s, r, z);
+        double be = rz_new / rz;
+        rz = rz_new;
+        for (int d = 0; d < s->n_dof; d++)
+            p[d] = z[d] + be * p[d];
+        rnorm = sqrt(dot_free(s, r, r));
+        it++;
+    }
+    if (iters)
+        *iters = it;
+    if (rnorm > tol * bnorm)
+        rc = cm_fail(err, CM_ERR_NUMERIC, "fem solver: CG did not converge in %d iterations (|r|/|b| = %.3g > %.3g)",
+                     it, rnorm / bnorm, tol);
+done:
+    free(r);
+    free(z);
+    free(p);
+    free(q);
+    free(dinv);
+    return rc;
+}
+
+int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
+                      double *u, int *iters, cm_error *err)
+{
+    /* K u = b with u = u_c on fixed dofs: K_ff du_f = b_f - (K u_c)_f */
+    double *r = s->w;
+    fem_solver_matvec(s, s->u_fixed, s->tmp);
+    for (int d = 0; d < s->n_dof; d++)
+        r[d] = s->fixed[d] ? 0.0 : b[d] - s->tmp[d];
+    int rc;
+    if (kind == FEM_LINEAR_CHOLMOD) {
+        rc = static_cholmod(s, r, s->tmp, err);
+        if (iters)
+            *iters = 1;
+    } else {
+        rc = static_cg(s, r, tol, max_iter, s->tmp, iters, err);
+    }
+    if (rc)
+        return rc;
+    for (int d = 0; d < s->n_dof; d++)
+        u[d] = s->fixed[d] ? s->u_fixed[d] : s->tmp[d];
+    return CM_OK;
+}
+
+int fem_solver_stability(fem_solver *s, const fem_mesh *m, int max_power_iter, fem_stability *st, cm_error *err)
+{
+    memset(st, 0, sizeof *st);
+    fem_mesh_measure(m, &st->h_min, NULL);
+    st->wave_speed = sqrt((s->lambda + 2.0 * s->mu) / s->rho);
+    st->dt_estimate = st->h_min / st->wave_speed;
+
+    /* Gershgorin: lambda_max(M^-1 K) <= max_i sum_j |K_ij| / m_i (free rows
+     * and columns; M^-1 K is similar to M^-1/2 K M^-1/2). */
+    const int *Kp = s->K->p, *Ki = s->K->i;
+    const double *Kx = s->K->x;
+    double gmax = 0.0;
+    for (int k = 0; k < s->n_free; k++) {
+        int d = s->free_dofs[k];
+        double acc = 0.0;
+        for (int p = Kp[d]; p < Kp[d + 1]; p++)
+            if (!s->fixed[Ki[p]])
+                acc += fabs(Kx[p]) / sqrt(s->mass[d] * s->mass[Ki[p]]);
+        gmax = acc > gmax ? acc : gmax;
+    }
+    st->dt_gershgorin = 2.0 / sqrt(gmax);
+
+    /* Power iteration on A = M^-1/2 K M^-1/2 (free dofs), whose eigenvalues
+     * are omega^2. The Rayleigh quotient rises monotonically towards
+     * omega_max^2. Start: alternating signs (the highest modes are the most
+     * oscillatory) plus a deterministic perturbation. */
+    double *x = s->w, *y = s->tmp;
+    uint32_t seed = 12345u;
+    for (int d = 0; d < s->n_dof; d++) {
+        seed = seed * 1664525u + 1013904223u;
+        double rnd = (double)(seed >> 8) / 16777216.0 - 0.5;
+        x[d] = s->fixed[d] ? 0.0 : ((d / 3 + d) % 2 ? 1.0 : -1.0) + 0.5 * rnd;
+    }
+    double nx = sqrt(dot_free(s, x, x)), rq = 0.0, rq_old = 0.0;
+    int it;
+    if (max_power_iter < 1)
+        max_power_iter = 1;
+    for (it = 0; it < max_power_iter; it++) {
+        for (int d = 0; d < s->n_dof; d++)
+            x[d] = s->fixed[d] ? 0.0 : x[d] / (nx * sqrt(s->mass[d]));
+        fem_solver_matvec(s, x, y);
+        for (int d = 0; d < s->n_dof; d++) {
+            y[d] = s->fixed[d] ? 0.0 : y[d] / sqrt(s->mass[d]);
+            x[d] *= sqrt(s->mass[d]); /* back to the unit vector */
+        }
+        rq = dot_free(s, x, y);
+        nx = sqrt(dot_free(s, y, y));
+        if (!(nx > 0.0))
+            return cm_fail(err, CM_ERR_NUMERIC, "fem solver: power iteration broke down");
+        memcpy(x, y, (size_t)s->n_dof * sizeof *x);
+        if (it > 20 && fabs(rq - rq_old) < 1e-9 * rq)
+            break;
+        rq_old = rq;
+    }
+    st->power_iterations_done = it < max_power_iter ? it + 1 : max_power_iter;
+    double w = sqrt(rq);
+    st->dt_power = 2.0 / w;
+    /* Damped central differences: dt <= (2/w)(sqrt(1+xi^2) - xi) with the
+     * modal damping ratio xi = alpha/(2w) + beta w/2 of the highest mode. */
+    double xi = 0.5 * (s->alpha / w + s->beta * w);
+    st->dt_limit = st->dt_power * (sqrt(1.0 + xi * xi) - xi);
+    memset(s->w, 0, (size_t)s->n_dof * sizeof(double));
+    return CM_OK;
+}
+
+void fem_solver_set_state(fem_solver *s, const double *u, const double *v)
+{
+    for (int d = 0; d < s->n_dof; d++) {
+        s->u[d] = s->fixed[d] ? s->u_fixed[d] : (u ? u[d] : 0.0);
+        s->v[d] = s->fixed[d] || !v ? 0.0 : v[d];
+        s->w[d] = s->u[d] + s->beta * s->v[d];
+    }
+    /* a = M^-1 (f - K (u + beta v) - alpha M v) */
+    fem_solver_matvec(s, s->w, s->tmp);
+    for (int d = 0; d < s->n_dof; d++)
+        s->a[d] = s->inv_mass[d] * (s->f[d] - s->tmp[d]) - s->alpha * (s->fixed[d] ? 0.0 : s->v[d]);
+}
+
+int fem_solver_prepare(fem_solver *s, fem_integrator integ, double h, cm_error *err)
+{
+    s->integrator = integ;
+    if (integ != FEM_INTEGRATOR_NEWMARK)
+        return CM_OK;
+    if (!(h > 0.0))
+        return cm_fail(err, CM_ERR_RANGE, "fem solver: Newmark step must be positive (%g)", h);
+    if (s->Leff && s->h_eff == h)
+        return CM_OK;
+    /* K_eff = K + (2/h) C + (4/h^2) M, C = alpha M + beta K (average
+     * acceleration: beta_N = 1/4, gamma_N = 1/2). M is diagonal, Kff upper
+     * with sorted columns: the diagonal is the last entry of each column. */
+    cholmod_sparse *Ke = cholmod_copy_sparse(s->Kff, &s->cc);
+    if (!Ke)
+        return cholmod_failed(s, err, "copy_sparse");
+    double ck = 1.0 + 2.0 * s->beta / h, cm = 4.0 / (h * h) + 2.0 * s->alpha / h;
+    const int *p = Ke->p, *ri = Ke->i;
+    double *x = Ke->x;
+    for (int j = 0; j < s->n_free; j++) {
+        int diag = -1;
+        for (int q = p[j]; q < p[j + 1]; q++) {
+            x[q] *= ck;
+            if (ri[q] == j)
+                diag = q;
+        }
+        if (diag < 0) {
+            cholmod_free_sparse(&Ke, &s->cc);
+            return cm_fail(err, CM_ERR_NUMERIC, "fem solver: missing diagonal in K (free dof %d)", j);
+        }
+        x[diag] += cm * s->mass[s->free_dofs[j]];
+    }
+    if (!s->Leff) {
+        s->Leff = cholmod_analyze(Ke, &s->cc);
+        if (!s->Leff) {
+            cholmod_free_sparse(&Ke, &s->cc);
+            return cholmod_failed(s, err, "analyze");
+        }
+    }
+    int ok = cholmod_factorize(Ke, s->Leff, &s->cc);
+    cholmod_free_sparse(&Ke, &s->cc);
+    if (!ok || s->cc.status != CHOLMOD_OK)
+        return cm_fail(err, CM_ERR_NUMERIC, "fem solver: K_eff factorization failed (status %d, column %d)",
+                       s->cc.status, (int)s->Leff->minor);
+    s->h_eff = h;
+    /* One solve now so that the solve workspaces exist before the loop. */
+    if (!cholmod_solve2(CHOLMOD_A, s->Leff, s->rhs, NULL, &s->sol, NULL, &s->Y, &s->E, &s->cc))
+        return cholmod_failed(s, err, "solve");
+    return CM_OK;
+}
+
+/* Explicit central differences (eq. 32) in velocity-Verlet form, which for a
+ * constant step is algebraically eq. 32, u+ = 2u - u- + dt^2 M^-1 (b - K u),
+ * and keeps velocities at whole steps for the interface:
+ *   v+1/2 = v + h/2 a;  u+ = u + h v+1/2;
+ *   a+ = M^-1 (f - K (u+ + beta v+1/2)) - alpha v+1/2;  v+ = v+1/2 + h/2 a+
+ * (Rayleigh damping uses the half-step velocity, lagged as usual). */
+static void step_explicit(fem_solver *s, double h)
+{
+    int n = s->n_dof;
+    double *u = s->u, *v = s->v, *a = s->a, *w = s->beta != 0.0 ? s->w : s->u;
+    const double *f = s->f, *im = s->inv_mass;
+    const double hh = 0.5 * h, beta = s->beta, alpha = s->alpha;
+    FEM_OMP_FOR
+    for (int d = 0; d < n; d++) {
+        v[d] += hh * a[d];
+        u[d] += h * v[d];
+        if (beta != 0.0)
+            s->w[d] = u[d] + beta * v[d];
+    }
+    const int *Kp = s->K->p, *Ki = s->K->i;
+    const double *Kx = s->K->x;
+    FEM_OMP_FOR
+    for (int r = 0; r < n; r++) {
+        double ku = 0.0;
+        for (int p = Kp[r]; p < Kp[r + 1]; p++)
+            ku += Kx[p] * w[Ki[p]];
+        double ar = im[r] * (f[r] - ku) - (im[r] != 0.0 ? alpha * v[r] : 0.0); /* eq. 32 */
+        a[r] = ar;
+        v[r] += hh * ar;
+    }
+}
+
+/* Newmark average acceleration in increments: with du = u+ - u,
+ *   K_eff du = f+ - K (u - beta v) + M (4/h v + a + alpha v)   (C = aM + bK)
+ *   a+ = 4/h^2 du - 4/h v - a;   v+ = 2/h du - v. */
+static int step_newmark(fem_solver *s, double h, cm_error *err)
+{
+    int n = s->n_dof;
+    double *u = s->u, *v = s->v, *a = s->a;
+    for (int d = 0; d < n; d++)
+        s->w[d] = u[d] - s->beta * v[d];
+    fem_solver_matvec(s, s->w, s->tmp);
+    double *b = s->rhs->x;
+    for (int k = 0; k < s->n_free; k++) {
+        int d = s->free_dofs[k];
+        b[k] = s->f[d] - s->tmp[d] + s->mass[d] * (4.0 / h * v[d] + a[d] + s->alpha * v[d]);
+    }
+    if (!cholmod_solve2(CHOLMOD_A, s->Leff, s->rhs, NULL, &s->sol, NULL, &s->Y, &s->E, &s->cc))
+        return cholmod_failed(s, err, "solve");
+    const double *du = s->sol->x;
+    for (int k = 0; k < s->n_free; k++) {
+        int d = s->free_dofs[k];
+        double an = 4.0 / (h * h) * du[k] - 4.0 / h * v[d] - a[d];
+        v[d] = 2.0 / h * du[k] - v[d];
+        a[d] = an;
+        u[d] += du[k];
+    }
+    return CM_OK;
+}
+
+int fem_solver_step(fem_solver *s, double h, cm_error *err)
+{
+    int rc = CM_OK;
+    switch (s->integrator) {
+    case FEM_INTEGRATOR_EXPLICIT:
+        step_explicit(s, h);
+        break;
+    case FEM_INTEGRATOR_NEWMARK:
+        if (!s->Leff || s->h_eff != h)
+            return cm_fail(err, CM_ERR_STATE, "fem solver: Newmark step %g s not prepared (have %g s)", h, s->h_eff);
+        rc = step_newmark(s, h, err);
+        break;
+    case FEM_INTEGRATOR_RIGID:
+        break;
+    }
+    s->time += h;
+    s->steps++;
+    return rc;
+}
+
+double fem_solver_elastic_energy(const fem_solver *s)
+{
+    fem_solver_matvec(s, s->u, s->tmp);
+    double acc = 0.0;
+    for (int d = 0; d < s->n_dof; d++)
+        acc += s->u[d] * s->tmp[d];
+    return 0.5 * acc;
+}
+
+double fem_solver_kinetic_energy(const fem_solver *s)
+{
+    double acc = 0.0;
+    for (int d = 0; d < s->n_dof; d++)
+        acc += s->mass[d] * s->v[d] * s->v[d];
+    return 0.5 * acc;
+}

@@ -1,0 +1,79 @@
+/* Linear elastic system: K (eq. 34), lumped M (eq. 33), Dirichlet
+ * constraints, the static solve (sect. 3.3, CHOLMOD or Jacobi-CG), the stable
+ * step, and the integrators. Owns the one cholmod_common. Internal to fem/. */
+#ifndef FEM_SOLVER_H
+#define FEM_SOLVER_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include <cholmod.h>
+
+#include "error.h"
+#include "fem.h"
+#include "fem_mesh.h"
+
+typedef struct fem_solver {
+    cholmod_common cc;     /* the one CHOLMOD context of the FEM server */
+    bool cc_started;
+    int n_dof;             /* 3 * nodes */
+    double lambda, mu, rho;
+    double alpha, beta;    /* Rayleigh damping C = alpha M + beta K */
+    cholmod_sparse *K;     /* full symmetric storage (stype 0): columns == rows */
+    double *mass;          /* lumped mass per dof [kg] (eq. 33 row sums) */
+    double *inv_mass;      /* 1/m on free dofs, 0 on fixed ones */
+    uint8_t *fixed;        /* per dof: 1 = Dirichlet */
+    double *u_fixed;       /* prescribed displacement on fixed dofs */
+    int n_free;
+    int32_t *free_dofs;
+    cholmod_sparse *Kff;   /* free-free block, upper (stype 1) */
+    cholmod_factor *L;     /* Cholesky of Kff, made on first direct solve */
+    /* Dynamics */
+    fem_integrator integrator;
+    cholmod_factor *Leff;  /* Newmark: K_eff = (1+2beta/h) K + (4/h^2 + 2alpha/h) M */
+    double h_eff;          /* sub-step Leff was made for */
+    cholmod_dense *rhs, *sol, *Y, *E; /* solve workspaces (n_free x 1), reused */
+    double *u, *v, *a;     /* state per dof (rim frame) */
+    double *f;             /* current total load per dof [N]: set by the caller */
+    double *w, *tmp;       /* work vectors */
+    double time;
+    long steps;
+} fem_solver;
+
+int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double alpha, double beta,
+                      fem_solver **out, cm_error *err);
+void fem_solver_destroy(fem_solver **s);
+
+/* Fixes the dofs with fixed[d] != 0 at values[d] (values NULL: 0) and builds
+ * the free-free block. Resets the state to u = prescribed, v = a = 0. */
+int fem_solver_constrain(fem_solver *s, const uint8_t *fixed, const double *values, cm_error *err);
+/* Convenience: all three dofs of nodes tagged FEM_NODE_RIM, at 0. */
+int fem_solver_constrain_rim(fem_solver *s, const fem_mesh *m, cm_error *err);
+
+/* y = K x (all dofs). */
+void fem_solver_matvec(const fem_solver *s, const double *x, double *y);
+
+/* K u = b with the constraints: u (all dofs) gets the prescribed values on
+ * fixed dofs. CG stops at |r| <= tol |b_free|; iters may be NULL. */
+int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
+                      double *u, int *iters, cm_error *err);
+
+/* Stable explicit step (see fem_stability in fem.h). */
+int fem_solver_stability(fem_solver *s, const fem_mesh *m, int max_power_iter, fem_stability *st,
+                         cm_error *err);
+
+/* Sets u, v (NULL: zero, prescribed values on fixed dofs) and the
+ * acceleration a = M^-1 (f - K u - C v) from the current s->f. */
+void fem_solver_set_state(fem_solver *s, const double *u, const double *v);
+
+/* Prepares the integrator for sub-step h (Newmark: factorizes K_eff when h
+ * changed). No allocation happens in fem_solver_step afterwards. */
+int fem_solver_prepare(fem_solver *s, fem_integrator integ, double h, cm_error *err);
+
+/* One step of length h (the prepared one for Newmark) with load s->f. */
+int fem_solver_step(fem_solver *s, double h, cm_error *err);
+
+double fem_solver_elastic_energy(const fem_solver *s);  /* 1/2 u^T K u, uses s->tmp */
+double fem_solver_kinetic_energy(const fem_solver *s);  /* 1/2 v^T M v */
+
+#endif

@@ -78,7 +78,8 @@ int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks 
     for (size_t k = 0; k < 3 * (size_t)nt; k++)
         c.tris[k] = (int)t[k]; /* ipc checked every index against the node count */
     memcpy(c.x, ipc_surface_nodes(c.ch), m * sizeof *c.x);
-    if ((rc = dem_surface_set(w, (int)c.nn, c.x, (int)nt, c.tris, def->surface_material, err)))
+    if ((rc = dem_surface_set(w, (int)c.nn, c.x, (int)nt, c.tris, def->surface_material, err)) ||
+        (rc = dem_surface_set_masses(w, ipc_surface_masses(c.ch), err)))
         goto done;
     /* Moments about the world origin and traction along +x (the protocol's). */
     const double origin[3] = {0, 0, 0}, travel[3] = {1, 0, 0};
@@ -139,6 +140,7 @@ int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks 
             out->info[IPC_INFO_CONTACTS] = acc.contacts * inv;
             out->info[IPC_INFO_DEM_WORK] = c.w_dem;
             out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
+            out->info[IPC_INFO_BED_TOP] = def->bed_top;
         }
         if ((rc = ipc_send_commit(c.ch)))
             break;

@@ -19,7 +19,18 @@ drive_def drive_def_default(void)
 
 int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
 {
-    int rc;
+    static const char *const motions[] = {"sink_travel", "fixed", NULL};
+    int motion = (int)d->motion, rc;
+    if ((rc = cm_scene_choice_opt(s, "wheel.motion", motions, motion, &motion, err)))
+        return rc;
+    d->motion = (drive_motion)motion;
+    if (d->motion == DRIVE_HOLD) {
+        /* Only the placement matters; the radius is still used for sinkage. */
+        if ((rc = cm_scene_doubles(s, "wheel.center", 3, -1e3, 1e3, d->center, err)) ||
+            (rc = cm_scene_double_opt(s, "wheel.radius", 1e-3, 10.0, d->radius, &d->radius, err)))
+            return rc;
+        return CM_OK;
+    }
     if ((rc = cm_scene_doubles(s, "wheel.center", 3, -1e3, 1e3, d->center, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.start_gap", 0.0, 1.0, d->start_gap, &d->start_gap, err)) ||
         (rc = cm_scene_double(s, "wheel.radius", 1e-3, 10.0, &d->radius, err)) ||
@@ -38,7 +49,7 @@ void drive_start(const drive_def *d, drive_state *s)
 {
     memset(s, 0, sizeof *s);
     memcpy(s->center, d->center, sizeof s->center);
-    s->phase = DRIVE_SINK;
+    s->phase = d->motion == DRIVE_HOLD ? DRIVE_FIXED : DRIVE_SINK;
 }
 
 double drive_travel_velocity(double omega, double radius, double slip)
@@ -57,6 +68,8 @@ double drive_slip(double omega, double radius, double v)
 
 int drive_update(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
 {
+    if (s->phase == DRIVE_FIXED)
+        return CM_OK;
     /* 1. Move by the motion held during the interval just computed. */
     for (int k = 0; k < 3; k++)
         s->center[k] += s->velocity[k] * dt;

@@ -15,9 +15,14 @@
 #include "error.h"
 #include "scene.h"
 
-typedef enum drive_phase { DRIVE_SINK = 0, DRIVE_TRAVEL = 1, DRIVE_DONE = 2 } drive_phase;
+typedef enum drive_phase { DRIVE_SINK = 0, DRIVE_TRAVEL = 1, DRIVE_DONE = 2, DRIVE_FIXED = 3 } drive_phase;
+
+/* wheel.motion: the test's two phases, or a wheel held still (verification
+ * scenes: grains dropped on a fixed tire or block). */
+typedef enum drive_motion { DRIVE_SINK_TRAVEL = 0, DRIVE_HOLD = 1 } drive_motion;
 
 typedef struct drive_def {
+    drive_motion motion;     /* "sink_travel" (default) or "fixed" */
     double center[3];        /* m, initial wheel centre (world) */
     double start_gap;        /* m, > 0: lower the wheel to this gap above the bed
                                 surface reported by the DEM before sinking; 0 = keep centre */

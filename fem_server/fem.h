@@ -105,6 +105,9 @@ int fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris)
  * seen from outside), unit outward normals per triangle. Any output may be
  * NULL. Sizes: x 3*n_nodes, tris 3*n_tris, normals 3*n_tris. */
 int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
+/* Lumped mass [kg] of each interface node (n_nodes entries); 0 for a fixed
+ * (rim) node. The DEM uses it for the two-body contact mass. */
+int fem_interface_masses(const fem_model *m, double *mass);
 /* Mesh node ids of the interface nodes (n_nodes entries). */
 int fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
 /* World-frame positions and velocities now (either may be NULL). */

@@ -112,6 +112,11 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
                 return cm_fail(err, CM_ERR_RANGE, "%s: fem.mesh.cells: whole numbers expected", cm_scene_path(s));
             c->box_cells[a] = (int)cells[a];
         }
+        /* fem_mesh_from_grid's limit, said here with the key and the file */
+        if (6.0 * cells[0] * cells[1] * cells[2] > 1e8)
+            return cm_fail(err, CM_ERR_RANGE, "%s: fem.mesh.cells: %g x %g x %g cells make %.3g tetrahedra, more "
+                           "than the 1e+08 allowed", cm_scene_path(s), cells[0], cells[1], cells[2],
+                           6.0 * cells[0] * cells[1] * cells[2]);
     }
     TRY(cm_scene_double(s, "fem.material.E", 1.0, 1e13, &c->E, err));
     TRY(cm_scene_double(s, "fem.material.nu", -0.99, 0.4999, &c->nu, err));

@@ -4,6 +4,8 @@
  * the named sets. Everything read is checked: a malformed file gives an
  * error naming the file, the line and what was expected. */
 #include <errno.h>
+#include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,9 +43,10 @@ static int token(reader *r, char *buf, size_t len, const char *what)
         return cm_fail(r->err, CM_ERR_PARSE, "%s:%d: unexpected end of file, expected %s", r->name, r->line, what);
     size_t n = 0;
     while (r->p < r->end && !(*r->p == ' ' || *r->p == '\t' || *r->p == '\r' || *r->p == '\n')) {
-        if (n + 1 < len)
-            buf[n++] = *r->p;
-        r->p++;
+        if (n + 1 >= len)
+            return cm_fail(r->err, CM_ERR_PARSE, "%s:%d: expected %s, found a word longer than %zu characters",
+                           r->name, r->line, what, len - 1);
+        buf[n++] = *r->p++;
     }
     buf[n] = 0;
     return CM_OK;
@@ -63,6 +66,22 @@ static int read_long(reader *r, long *v, const char *what)
     return CM_OK;
 }
 
+/* An integer that must lie in [lo, hi] (tags and dimensions kept as int). */
+static int read_long_in(reader *r, long *v, long lo, long hi, const char *what)
+{
+    int rc = read_long(r, v, what);
+    if (rc)
+        return rc;
+    if (*v < lo || *v > hi)
+        return cm_fail(r->err, CM_ERR_PARSE, "%s:%d: %s %ld outside [%ld, %ld]", r->name, r->line, what, *v, lo, hi);
+    return CM_OK;
+}
+
+/* Bytes left to read: every item a count announces takes at least two
+ * (a digit and a separator), so a count larger than this cannot be honest
+ * and is refused before anything is allocated for it. */
+static long bytes_left(const reader *r) { return (long)(r->end - r->p); }
+
 static int read_double(reader *r, double *v, const char *what)
 {
     char b[64], *e;
@@ -71,7 +90,7 @@ static int read_double(reader *r, double *v, const char *what)
         return rc;
     errno = 0;
     *v = strtod(b, &e);
-    if (*e || e == b || errno || *v != *v)
+    if (*e || e == b || errno || !isfinite(*v))
         return cm_fail(r->err, CM_ERR_PARSE, "%s:%d: expected a number (%s), found \"%s\"", r->name, r->line, what, b);
     return CM_OK;
 }
@@ -129,7 +148,8 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     long *tet_nodes = NULL, *tet_ids = NULL, n_tets = 0, cap_tets = 0;
     long *tri = NULL, n_tri = 0, cap_tri = 0; /* 3 node tags + flags + line */
     unsigned char *rim_tag = NULL;
-    bool have_nodes = false, have_elements = false;
+    long *renum = NULL; /* file node index -> mesh node index, -1 if unused */
+    bool have_nodes = false, have_elements = false, have_phys = false, have_ents = false;
 
     TRY(expect(&r, "$MeshFormat"));
     double version;
@@ -154,13 +174,19 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
             break;
         TRY(token(&r, b, sizeof b, "a section"));
         int sec_line = r.line;
+        bool *seen = !strcmp(b, "$PhysicalNames") ? &have_phys : !strcmp(b, "$Entities") ? &have_ents
+                     : !strcmp(b, "$Nodes") ? &have_nodes : !strcmp(b, "$Elements") ? &have_elements : NULL;
+        if (seen && *seen) {
+            rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: section %s appears twice", name, sec_line, b);
+            goto done;
+        }
         if (strcmp(b, "$PhysicalNames") == 0) {
             long n;
             TRY(read_long(&r, &n, "number of physical names"));
             for (long i = 0; i < n; i++) {
                 long dim, tag;
-                TRY(read_long(&r, &dim, "physical dimension"));
-                TRY(read_long(&r, &tag, "physical tag"));
+                TRY(read_long_in(&r, &dim, 0, 3, "physical dimension"));
+                TRY(read_long_in(&r, &tag, 1, INT_MAX, "physical tag"));
                 skip_space(&r);
                 if (r.p >= r.end || *r.p != '"') {
                     rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: expected a quoted physical name", name, r.line);
@@ -185,16 +211,22 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                 }
             }
             TRY(expect(&r, "$EndPhysicalNames"));
+            have_phys = true;
         } else if (strcmp(b, "$Entities") == 0) {
             long cnt[4];
             for (int d = 0; d < 4; d++)
                 TRY(read_long(&r, &cnt[d], "number of entities"));
-            size_t total = (size_t)(cnt[0] + cnt[1] + cnt[2] + cnt[3]);
-            if (cnt[0] < 0 || cnt[1] < 0 || cnt[2] < 0 || cnt[3] < 0 || total > 100000000u) {
-                rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: bad entity counts", name, r.line);
-                goto done;
+            /* each count checked before they are added: no overflow */
+            long total = 0;
+            for (int d = 0; d < 4; d++) {
+                if (cnt[d] < 0 || cnt[d] > bytes_left(&r) / 2) {
+                    rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: bad entity counts (%ld of dimension %d, file has %ld "
+                                 "bytes left)", name, r.line, cnt[d], d, bytes_left(&r));
+                    goto done;
+                }
+                total += cnt[d];
             }
-            ents = calloc(total ? total : 1, sizeof *ents);
+            ents = calloc(total ? (size_t)total : 1, sizeof *ents);
             if (!ents) {
                 rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", name);
                 goto done;
@@ -203,7 +235,7 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                 for (long i = 0; i < cnt[d]; i++) {
                     long tag, np, nb, pt;
                     double v;
-                    TRY(read_long(&r, &tag, "entity tag"));
+                    TRY(read_long_in(&r, &tag, 1, INT_MAX, "entity tag"));
                     for (int k = 0; k < (d == 0 ? 3 : 6); k++)
                         TRY(read_double(&r, &v, "entity bounding box"));
                     TRY(read_long(&r, &np, "number of physical tags"));
@@ -211,7 +243,7 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                     for (long k = 0; k < np; k++) {
                         TRY(read_long(&r, &pt, "physical tag"));
                         for (int q = 0; q < n_phys; q++)
-                            if (phys_dim[q] == d && phys_tag[q] == (int)(pt < 0 ? -pt : pt))
+                            if (phys_dim[q] == d && (pt == phys_tag[q] || pt == -(long)phys_tag[q]))
                                 fl |= phys_flag[q];
                     }
                     if (d > 0) {
@@ -222,16 +254,18 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                     ents[n_ents++] = (ent_flag){d, (int)tag, fl};
                 }
             TRY(expect(&r, "$EndEntities"));
+            have_ents = true;
         } else if (strcmp(b, "$Nodes") == 0) {
             long nb;
             TRY(read_long(&r, &nb, "number of node blocks"));
             TRY(read_long(&r, &n_nodes, "number of nodes"));
             TRY(read_long(&r, &min_tag, "minimum node tag"));
             TRY(read_long(&r, &max_tag, "maximum node tag"));
-            if (n_nodes < 1 || n_nodes > 100000000 || min_tag < 1 || max_tag < min_tag ||
-                max_tag - min_tag > 10 * n_nodes + 1000) {
-                rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: bad node counts/tags (%ld nodes, tags %ld..%ld)", name, r.line,
-                             n_nodes, min_tag, max_tag);
+            /* a node takes at least 8 bytes (tag and three coordinates) */
+            if (n_nodes < 1 || n_nodes > 100000000 || n_nodes > bytes_left(&r) / 8 || min_tag < 1 ||
+                max_tag < min_tag || max_tag - min_tag > 10 * n_nodes + 1000) {
+                rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: bad node counts/tags (%ld nodes, tags %ld..%ld, file has %ld "
+                             "bytes left)", name, r.line, n_nodes, min_tag, max_tag, bytes_left(&r));
                 goto done;
             }
             xs = malloc((size_t)n_nodes * 3 * sizeof *xs);
@@ -292,8 +326,8 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
             TRY(read_long(&r, &mx, "maximum element tag"));
             for (long bl = 0; bl < nb; bl++) {
                 long dim, etag, type, n;
-                TRY(read_long(&r, &dim, "entity dimension"));
-                TRY(read_long(&r, &etag, "entity tag"));
+                TRY(read_long_in(&r, &dim, 0, 3, "entity dimension"));
+                TRY(read_long_in(&r, &etag, 1, INT_MAX, "entity tag"));
                 TRY(read_long(&r, &type, "element type"));
                 TRY(read_long(&r, &n, "elements in block"));
                 int nn = nodes_of_type(type);
@@ -323,6 +357,11 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                         for (int k = 0; k < nn; k++)
                             rim_tag[nd[k]] = 1;
                     if (type == 4) {
+                        if (n_tets >= INT_MAX / 4) {
+                            rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: more than %d tetrahedra", name, r.line,
+                                         INT_MAX / 4);
+                            goto done;
+                        }
                         if (n_tets == cap_tets) {
                             cap_tets = cap_tets ? 2 * cap_tets : 1024;
                             long *t1 = realloc(tet_nodes, (size_t)cap_tets * 4 * sizeof *t1);
@@ -385,21 +424,39 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                      !have_nodes ? "$Nodes section" : !have_elements ? "$Elements section" : "tetrahedra (type 4)");
         goto done;
     }
-    TRY(fem_mesh_alloc(m, (int)n_nodes, (int)n_tets, err));
-    snprintf(m->source, sizeof m->source, "%s", name);
-    memcpy(m->x, xs, (size_t)n_nodes * 3 * sizeof *xs);
-    for (long e = 0; e < 4 * n_tets; e++)
-        m->tets[e] = (int32_t)tet_nodes[e];
-    int n_rim = 0;
+    /* Nodes no tetrahedron uses (Gmsh writes geometry points such as circle
+     * centres as nodes) would have no mass and no stiffness: drop them. */
+    renum = malloc((size_t)n_nodes * sizeof *renum);
+    if (!renum) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", name);
+        goto done;
+    }
     for (long i = 0; i < n_nodes; i++)
+        renum[i] = -1;
+    for (long e = 0; e < 4 * n_tets; e++)
+        renum[tet_nodes[e]] = 0;
+    long n_used = 0;
+    for (long i = 0; i < n_nodes; i++)
+        if (renum[i] == 0)
+            renum[i] = n_used++;
+    TRY(fem_mesh_alloc(m, (int)n_used, (int)n_tets, err));
+    snprintf(m->source, sizeof m->source, "%s", name);
+    int n_rim = 0;
+    for (long i = 0; i < n_nodes; i++) {
+        if (renum[i] < 0)
+            continue;
+        memcpy(&m->x[3 * renum[i]], &xs[3 * i], 3 * sizeof *xs);
         if (rim_tag[i]) {
-            m->node_tag[i] |= FEM_NODE_RIM;
+            m->node_tag[renum[i]] |= FEM_NODE_RIM;
             n_rim++;
         }
+    }
+    for (long e = 0; e < 4 * n_tets; e++)
+        m->tets[e] = (int32_t)renum[tet_nodes[e]];
     TRY(fem_mesh_finish(m, false, tet_ids, err));
     for (long k = 0; k < n_tri; k++) {
         const long *q = &tri[6 * k];
-        int f = fem_mesh_find_face(m, (int)q[0], (int)q[1], (int)q[2]);
+        int f = fem_mesh_find_face(m, (int)renum[q[0]], (int)renum[q[1]], (int)renum[q[2]]);
         if (f < 0) {
             rc = cm_fail(err, CM_ERR_PARSE, "%s:%ld: triangle %ld of group %s is not a face of the tetrahedral "
                          "boundary", name, q[4], q[5], (q[3] & G_CAVITY) ? "cavity" : "contact");
@@ -422,6 +479,7 @@ done:
     free(tet_ids);
     free(tri);
     free(rim_tag);
+    free(renum);
     return rc;
 }
 

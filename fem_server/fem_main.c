@@ -176,6 +176,7 @@ static int run(const options *o)
     }
     fem_interface_state(model, ipc_surface_nodes(ch), NULL);
     fem_interface_initial(model, NULL, ipc_surface_tris(ch), NULL);
+    fem_interface_masses(model, ipc_surface_masses(ch));
     memcpy(x_prev, ipc_surface_nodes(ch), 3 * (size_t)nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", nn, nt, o->shm);
     if ((rc = ipc_accept(ch))) {
@@ -237,12 +238,16 @@ static int run(const options *o)
             max_moment_mismatch = dm > max_moment_mismatch ? dm : max_moment_mismatch;
         }
 
-        /* Gentle placement: at the first exchange, lower the wheel to the
-         * requested gap above the bed before the sinkage phase starts. */
-        double bed = info[IPC_INFO_BED_HEIGHT];
-        if (n == 0 && drive.start_gap > 0 && bed != 0) {
-            ds.center[2] = bed + drive.radius + drive.start_gap;
-            cm_log_info("bed surface at z = %.4f m: wheel placed %.1f mm above it", bed, 1e3 * drive.start_gap);
+        /* Gentle placement: at the first exchange, lower the wheel until its
+         * lowest surface point is start_gap above the highest grain. */
+        double bed = info[IPC_INFO_BED_HEIGHT], bed_top = info[IPC_INFO_BED_TOP];
+        if (n == 0 && drive.start_gap > 0 && bed_top != 0) {
+            double lowest = x_prev[2];
+            for (uint32_t i = 1; i < nn; i++)
+                lowest = x_prev[3 * i + 2] < lowest ? x_prev[3 * i + 2] : lowest;
+            ds.center[2] += bed_top + drive.start_gap - lowest;
+            cm_log_info("bed surface at z = %.4f m (highest grain top %.4f m): wheel lowered to %.1f mm above it",
+                        bed, bed_top, 1e3 * drive.start_gap);
         }
 
         /* Advance the tire over the interval with the motion decided last time. */
@@ -308,7 +313,7 @@ static int run(const options *o)
                 double by_travel = (drive.travel_distance - ds.travelled) / ds.velocity[0] / interval;
                 remaining = by_travel < remaining ? by_travel : remaining;
             }
-            static const char *const phase_names[] = {"sinkage", "travel", "done"};
+            static const char *const phase_names[] = {"sinkage", "travel", "done", "fixed"};
             cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %5.0f s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm",
                         phase_names[ds.phase], time + interval, rate, remaining > 0 ? remaining / rate : 0, load,
                         th - fabs(tr), 1e3 * sinkage);

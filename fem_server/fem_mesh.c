@@ -259,8 +259,18 @@ static bool grid_cell(const fem_grid *g, int i, int j, int k)
     return g->cell == NULL || g->cell(g->ctx, i, j, k);
 }
 
+/* Largest mesh a grid may make: element and node indices are int, and
+ * 4 * n_tets must stay below INT_MAX (tets[4 * e + k]). */
+#define GRID_MAX_TETS 100000000.0
+
 int fem_mesh_from_grid(const fem_grid *g, fem_mesh *m, cm_error *err)
 {
+    /* In double: ni * nj * nk overflows int long before memory runs out. */
+    double n_tets_max = 6.0 * (double)g->ni * (double)g->nj * (double)g->nk;
+    if (g->ni < 1 || g->nj < 1 || g->nk < 1 || n_tets_max > GRID_MAX_TETS)
+        return cm_fail(err, CM_ERR_RANGE, "%s: %d x %d x %d cells make up to %.3g tetrahedra, more than the %.3g "
+                       "allowed", m->source[0] ? m->source : "grid mesh", g->ni, g->nj, g->nk, n_tets_max,
+                       GRID_MAX_TETS);
     int nip = g->periodic_i ? g->ni : g->ni + 1;
     size_t n_grid = (size_t)nip * (size_t)(g->nj + 1) * (size_t)(g->nk + 1);
     int32_t *id = malloc(n_grid * sizeof *id);

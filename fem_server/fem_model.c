@@ -266,6 +266,19 @@ int fem_interface_nodes(const fem_model *m, uint32_t *ids)
     return CM_OK;
 }
 
+int fem_interface_masses(const fem_model *m, double *mass)
+{
+    /* Lumped (row-sum) mass of each interface node, eq. 33; rim nodes are
+     * fixed and count as infinitely heavy (0 in the protocol's convention),
+     * and so does every node of a rigid tire. */
+    for (uint32_t k = 0; k < m->n_if_nodes; k++) {
+        size_t d = 3 * (size_t)m->if_nodes[k];
+        int moves = m->cfg.integrator != FEM_INTEGRATOR_RIGID && m->s->inv_mass[d] > 0.0;
+        mass[k] = moves ? m->s->mass[d] : 0.0;
+    }
+    return CM_OK;
+}
+
 int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals)
 {
     if (x)

@@ -165,6 +165,8 @@ int ipc_layout_compute(uint32_t n_nodes, uint32_t n_tris, uint32_t slots, ipc_la
     uint64_t off = align_up(sizeof(ipc_segment_header), IPC_PAGE);
     lay->nodes_offset = off;
     off = align_up(off + 3ull * n_nodes * sizeof(double), IPC_ALIGN);
+    lay->masses_offset = off;
+    off = align_up(off + 1ull * n_nodes * sizeof(double), IPC_ALIGN);
     lay->tris_offset = off;
     off = align_up(off + 3ull * n_tris * sizeof(uint32_t), IPC_PAGE);
     lay->payload_len[IPC_ROLE_FEM] = 3ull * n_nodes; /* forces */
@@ -413,6 +415,7 @@ int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, c
     h->ring_slots = slots;
     h->flags = ch->flags;
     h->nodes_offset = lay.nodes_offset;
+    h->masses_offset = lay.masses_offset;
     h->tris_offset = lay.tris_offset;
     for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++) {
         h->ring_offset[r] = lay.ring_offset[r];
@@ -527,7 +530,7 @@ static int check_header_fields(ipc_channel *ch, size_t file_size, uint32_t my_ve
         return set_err(ch, IPC_ERR_SIZE, "%s: size mismatch: counts out of range (%u nodes, %u triangles, %u slots)",
                        ch->name, n, m, slots);
     int same = lay.segment_size == file_size && lay.nodes_offset == h->nodes_offset &&
-               lay.tris_offset == h->tris_offset;
+               lay.masses_offset == h->masses_offset && lay.tris_offset == h->tris_offset;
     for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++)
         same = same && lay.ring_offset[r] == h->ring_offset[r] && lay.slot_size[r] == h->slot_size[r] &&
                lay.payload_len[r] == h->payload_len[r];
@@ -553,11 +556,16 @@ static int check_header_fields(ipc_channel *ch, size_t file_size, uint32_t my_ve
 static int check_surface(ipc_channel *ch)
 {
     const double *x = (const double *)(ch->base + ch->lay.nodes_offset);
+    const double *mass = (const double *)(ch->base + ch->lay.masses_offset);
     const uint32_t *t = (const uint32_t *)(ch->base + ch->lay.tris_offset);
     for (uint64_t i = 0; i < 3ull * ch->n_nodes; i++)
         if (!isfinite(x[i]))
             return set_err(ch, IPC_ERR_PROTOCOL, "%s: interface node %llu has a non-finite coordinate", ch->name,
                            (unsigned long long)(i / 3));
+    for (uint64_t i = 0; i < ch->n_nodes; i++)
+        if (!isfinite(mass[i]) || mass[i] < 0)
+            return set_err(ch, IPC_ERR_PROTOCOL, "%s: interface node %llu has mass %g (want finite, >= 0)", ch->name,
+                           (unsigned long long)i, mass[i]);
     for (uint64_t k = 0; k < ch->n_tris; k++) {
         uint32_t a = t[3 * k], b = t[3 * k + 1], c = t[3 * k + 2];
         if (a >= ch->n_nodes || b >= ch->n_nodes || c >= ch->n_nodes || a == b || b == c || a == c)
@@ -735,6 +743,7 @@ fail:
 uint32_t ipc_surface_node_count(const ipc_channel *ch) { return ch->n_nodes; }
 uint32_t ipc_surface_tri_count(const ipc_channel *ch) { return ch->n_tris; }
 double *ipc_surface_nodes(ipc_channel *ch) { return (double *)(ch->base + ch->lay.nodes_offset); }
+double *ipc_surface_masses(ipc_channel *ch) { return (double *)(ch->base + ch->lay.masses_offset); }
 uint32_t *ipc_surface_tris(ipc_channel *ch) { return (uint32_t *)(ch->base + ch->lay.tris_offset); }
 double ipc_dem_dt(const ipc_channel *ch) { return ch->dem_dt; }
 uint32_t ipc_exchange_every(const ipc_channel *ch) { return ch->exchange_every; }

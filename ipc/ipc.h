@@ -76,6 +76,7 @@ enum {
     IPC_INFO_CONTACTS,      /* number of grain-surface contacts */
     IPC_INFO_DEM_WORK,      /* J, interface work seen by the DEM, accumulated */
     IPC_INFO_BED_HEIGHT,    /* m, height of the undisturbed bed surface (0 if none) */
+    IPC_INFO_BED_TOP,       /* m, highest grain top (z + r) before the wheel arrives (0 if none) */
     /* FEM -> DEM: wheel state, world frame. */
     IPC_INFO_CENTER_X = 16, IPC_INFO_CENTER_Y, IPC_INFO_CENTER_Z, /* m */
     IPC_INFO_VEL_X, IPC_INFO_VEL_Y, IPC_INFO_VEL_Z,              /* m/s */
@@ -143,12 +144,15 @@ int ipc_accept(ipc_channel *ch);
  * and waits for the FEM's answer. */
 int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, char *err, size_t errlen);
 
-/* The interface surface: node positions (3 n, m) and triangles (3 m node
- * indices, counter-clockwise seen from outside). Written by the FEM side
- * before ipc_accept; on the DEM side read-only and already validated. */
+/* The interface surface: node positions (3 n, m), node masses (n, kg: the
+ * lumped mass of each node, 0 for a node that does not yield, e.g. a rim
+ * node or a rigid wheel; the segment starts with all 0) and triangles (3 m
+ * node indices, counter-clockwise seen from outside). Written by the FEM
+ * side before ipc_accept; on the DEM side read-only and already validated. */
 uint32_t ipc_surface_node_count(const ipc_channel *ch);
 uint32_t ipc_surface_tri_count(const ipc_channel *ch);
 double *ipc_surface_nodes(ipc_channel *ch);
+double *ipc_surface_masses(ipc_channel *ch);
 uint32_t *ipc_surface_tris(ipc_channel *ch);
 
 /* Handshake results, valid on both sides after accept/attach. */

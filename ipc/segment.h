@@ -38,7 +38,7 @@ typedef struct ipc_segment_header {
     uint32_t n_nodes, n_tris;
     uint32_t ring_slots;
     uint32_t flags;                  /* IPC_SEG_* */
-    uint64_t nodes_offset, tris_offset;
+    uint64_t nodes_offset, masses_offset, tris_offset;
     uint64_t ring_offset[3];         /* by receiving role */
     uint64_t slot_size[3];           /* bytes per frame incl. head, by receiving role */
     uint64_t payload_len[3];         /* doubles per frame, by receiving role */
@@ -69,7 +69,7 @@ _Static_assert(sizeof(ipc_segment_header) <= IPC_PAGE, "header fits one page");
 /* The layout implied by the counts; both sides compute it, the attacher
  * compares it field by field with what the header claims. */
 typedef struct ipc_layout {
-    uint64_t nodes_offset, tris_offset;
+    uint64_t nodes_offset, masses_offset, tris_offset;
     uint64_t ring_offset[3], slot_size[3], payload_len[3];
     uint64_t segment_size;
 } ipc_layout;

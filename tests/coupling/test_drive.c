@@ -69,6 +69,20 @@ static int phases(void)
     return 0;
 }
 
+static int fixed_wheel_stays(void)
+{
+    drive_def d = drive_def_default();
+    d.motion = DRIVE_HOLD;
+    d.center[0] = 0.1, d.center[2] = 0.3;
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    for (int k = 0; k < 100; k++)
+        ENSURE(drive_update(&d, &s, k * 1e-3, 1e-3, 1e9, &err) == CM_OK);
+    ENSURE(s.phase == DRIVE_FIXED && s.center[0] == 0.1 && s.center[2] == 0.3 && s.omega == 0 && s.angle == 0);
+    return 0;
+}
+
 static int sinkage_without_load_fails(void)
 {
     drive_def d = drive_def_default();
@@ -136,6 +150,7 @@ static int steady_detection_and_coverage(void)
 static const test_case tests[] = {
     {"slip_definitions", slip_definitions},
     {"phases", phases},
+    {"fixed_wheel_stays", fixed_wheel_stays},
     {"sinkage_without_load_fails", sinkage_without_load_fails},
     {"steady_detection_and_coverage", steady_detection_and_coverage},
 };

@@ -355,13 +355,16 @@ static int time_step_mismatch(void)
 
 /* ---- corrupted segments: every size and index is checked -------------------- */
 
-enum corruption { C_NODES, C_SEGSIZE, C_RING_OFFSET, C_SLOT_SIZE, C_HEADER_SIZE, C_TRI_INDEX, C_NAN_NODE, C_COUNT };
+enum corruption {
+    C_NODES, C_SEGSIZE, C_RING_OFFSET, C_SLOT_SIZE, C_HEADER_SIZE, C_MASS_OFFSET, C_TRI_INDEX, C_NAN_NODE,
+    C_NEG_MASS, C_COUNT
+};
 
 static int corrupted_header_refused(void)
 {
     static const char *const expect[C_COUNT] = {"size mismatch", "size mismatch", "size mismatch",
-                                                "size mismatch", "size mismatch", "invalid node indices",
-                                                "non-finite"};
+                                                "size mismatch", "size mismatch", "size mismatch",
+                                                "invalid node indices", "non-finite", "has mass -1"};
     for (int c = 0; c < C_COUNT; c++) {
         char shm[128];
         unique_name(shm, sizeof shm, "corrupt");
@@ -395,6 +398,8 @@ static int corrupted_header_refused(void)
         case C_HEADER_SIZE: h->header_size = 12; break;
         case C_TRI_INDEX: t[3 * 57 + 1] = 64; break;
         case C_NAN_NODE: x[3 * 10 + 2] = NAN; break;
+        case C_MASS_OFFSET: h->masses_offset -= 64; break;
+        case C_NEG_MASS: ipc_surface_masses(ch)[33] = -1.0; break;
         }
         munmap(h, IPC_PAGE);
         peer dem;
@@ -499,7 +504,8 @@ static int names_and_layout(void)
     /* Slots hold the head plus the payload, aligned; rings do not overlap. */
     ENSURE(lay.slot_size[IPC_ROLE_FEM] >= sizeof(ipc_frame_head) + 3 * 20000 * 8);
     ENSURE(lay.slot_size[IPC_ROLE_DEM] >= sizeof(ipc_frame_head) + 6 * 20000 * 8);
-    ENSURE(lay.tris_offset >= lay.nodes_offset + 3 * 20000 * 8);
+    ENSURE(lay.masses_offset >= lay.nodes_offset + 3 * 20000 * 8);
+    ENSURE(lay.tris_offset >= lay.masses_offset + 20000 * 8);
     ENSURE(lay.ring_offset[IPC_ROLE_FEM] >= lay.tris_offset + 3 * 40000 * 4);
     ENSURE(lay.ring_offset[IPC_ROLE_DEM] >= lay.ring_offset[IPC_ROLE_FEM] + 2 * lay.slot_size[IPC_ROLE_FEM]);
     ENSURE(lay.segment_size >= lay.ring_offset[IPC_ROLE_DEM] + 2 * lay.slot_size[IPC_ROLE_DEM]);

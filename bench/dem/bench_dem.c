@@ -1,0 +1,154 @@
+/* bench_dem: the DEM side of bench/dem/run.
+ *   bench_dem prepare WORK_DIR          settle (or reload) the 20 000-grain bed,
+ *                                       write WORK_DIR/bed.data for LIGGGHTS
+ *   bench_dem run WORK_DIR THREADS STEPS [stirred]
+ *                                       time STEPS steps from the bed (at rest,
+ *                                       or "stirred": every grain given a random
+ *                                       velocity in [-0.5, 0.5] m/s per axis, so
+ *                                       the neighbour list is rebuilt often),
+ *                                       print "grain_steps_per_s <value>"
+ * Materials and step are fixed here and in in.bench (keep them equal):
+ * radius 3.2775–3.6225 mm, density 2600 kg/m3, E 5e7 Pa, ν 0.3, e 0.5,
+ * μ 0.6, dt 1e-5 s, box 0.2 x 0.2 m with floor and four side walls. */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dem.h"
+#include "log.h"
+#include "timer.h"
+
+static const dem_material SOIL = {.density = 2600.0, .young = 5e7, .poisson = 0.3, .restitution = 0.5, .friction = 0.6};
+
+static dem_bed_params bed_params(const char *dir)
+{
+    dem_bed_params p = dem_bed_params_default();
+    double lo[3] = {0, 0, 0}, hi[3] = {0.2, 0.2, 1.0};
+    memcpy(p.box_min, lo, sizeof lo);
+    memcpy(p.box_max, hi, sizeof hi);
+    p.n_layers = 1;
+    p.layers[0].count = 20000;
+    p.layers[0].radius[0] = 3.2775e-3;
+    p.layers[0].radius[1] = 3.6225e-3;
+    p.seed = 2026;
+    p.settle_ke = 1e-8;    /* J per grain: ~6 mm/s */
+    p.settle_min_time = 0.3;
+    p.settle_max_time = 3.0;
+    p.settle_dt = 3e-5;    /* settling only; the benchmark runs 1e-5 */
+    snprintf(p.file, sizeof p.file, "%s/bed_20000.h5", dir);
+    return p;
+}
+
+static int make_world(int threads, const char *dir, dem_world **w, cm_error *err)
+{
+    dem_world_def d = dem_world_def_default();
+    d.dt = 1e-5;
+    d.max_grains = 20000;
+    d.threads = threads;
+    int rc = dem_world_create(&d, 1, &SOIL, w, err);
+    if (rc)
+        return rc;
+    dem_bed_params p = bed_params(dir);
+    bool loaded;
+    return dem_bed_build(*w, &p, NULL, NULL, &loaded, err);
+}
+
+/* The stirring velocity of grain id (deterministic). */
+static void stir_velocity(int id, double v[3])
+{
+    uint64_t s = 0x9e3779b97f4a7c15ULL * (uint64_t)(id + 1);
+    for (int k = 0; k < 3; k++) {
+        s ^= s >> 31;
+        s *= 0xbf58476d1ce4e5b9ULL;
+        s ^= s >> 29;
+        v[k] = ((double)(s >> 11) / 9007199254740992.0 - 0.5);
+    }
+}
+
+static int write_liggghts_data(const dem_world *w, const char *path, int stirred, cm_error *err)
+{
+    FILE *f = fopen(path, "w");
+    if (!f)
+        return cm_fail(err, CM_ERR_IO, "%s: cannot write", path);
+    int n = dem_grain_count(w);
+    double zmax = 0;
+    for (int i = 0; i < n; i++) {
+        dem_grain_state g;
+        dem_grain_get(w, i, &g);
+        if (g.x[2] + g.radius > zmax)
+            zmax = g.x[2] + g.radius;
+    }
+    fprintf(f, "LIGGGHTS data file: settled bed from bench_dem\n\n%d atoms\n1 atom types\n\n", n);
+    fprintf(f, "0.0 0.2 xlo xhi\n0.0 0.2 ylo yhi\n0.0 %.6f zlo zhi\n\nAtoms\n\n", zmax * 1.5 + 0.01);
+    for (int i = 0; i < n; i++) {
+        dem_grain_state g;
+        dem_grain_get(w, i, &g);
+        /* atom_style granular: id type diameter density x y z */
+        fprintf(f, "%d 1 %.17g %.17g %.17g %.17g %.17g\n", i + 1, 2 * g.radius, SOIL.density, g.x[0], g.x[1], g.x[2]);
+    }
+    if (stirred) {
+        fprintf(f, "\nVelocities\n\n");
+        for (int i = 0; i < n; i++) {
+            double v[3];
+            stir_velocity(i, v);
+            fprintf(f, "%d %.17g %.17g %.17g 0 0 0\n", i + 1, v[0], v[1], v[2]);
+        }
+    }
+    if (fclose(f) != 0)
+        return cm_fail(err, CM_ERR_IO, "%s: write failed", path);
+    return CM_OK;
+}
+
+int main(int argc, char **argv)
+{
+    cm_log_set_tag("bench_dem");
+    cm_error err = {0};
+    dem_world *w = NULL;
+    int rc;
+    if (argc == 3 && strcmp(argv[1], "prepare") == 0) {
+        double t0 = cm_now();
+        rc = make_world(2, argv[2], &w, &err);
+        if (rc == CM_OK) {
+            char path[2048];
+            snprintf(path, sizeof path, "%s/bed.data", argv[2]);
+            rc = write_liggghts_data(w, path, 0, &err);
+            snprintf(path, sizeof path, "%s/bed_stirred.data", argv[2]);
+            if (rc == CM_OK)
+                rc = write_liggghts_data(w, path, 1, &err);
+            printf("bed ready: %d grains, height %.4f m (%.1f s)\n", dem_grain_count(w), dem_bed_height(w),
+                   cm_now() - t0);
+        }
+    } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "run") == 0) {
+        int threads = atoi(argv[3]), steps = atoi(argv[4]);
+        rc = make_world(threads, argv[2], &w, &err);
+        if (argc == 6 && strcmp(argv[5], "stirred") == 0)
+            for (int i = 0; i < dem_grain_count(w) && rc == CM_OK; i++) {
+                double v[3];
+                stir_velocity(i, v);
+                dem_grain_set(w, i, NULL, v, NULL);
+            }
+        for (int k = 0; k < 200 && rc == CM_OK; k++) /* warm-up (as LIGGGHTS' "run 200") */
+            rc = dem_step(w, &err);
+        double t0 = cm_now();
+        for (int k = 0; k < steps && rc == CM_OK; k++)
+            rc = dem_step(w, &err);
+        double t = cm_now() - t0;
+        if (rc == CM_OK) {
+            dem_stats s;
+            dem_world_stats(w, &s);
+            printf("threads %d steps %d wall_s %.4f contacts %d rebuilds %ld\n", threads, steps, t,
+                   s.contacts_gg + s.contacts_gw, s.profile.rebuilds);
+            printf("profile: broad %.3f s narrow %.3f s exchange %.3f s integrate %.3f s\n", s.profile.broad,
+                   s.profile.narrow, s.profile.exchange, s.profile.integrate);
+            printf("grain_steps_per_s %.6g\n", (double)dem_grain_count(w) * steps / t);
+        }
+    } else {
+        fprintf(stderr, "usage: %s prepare WORK_DIR | run WORK_DIR THREADS STEPS [stirred]\n", argv[0]);
+        return 2;
+    }
+    if (rc)
+        cm_log_error("%s: %s", cm_error_name(rc), err.msg);
+    dem_world_destroy(&w);
+    return rc ? 1 : 0;
+}

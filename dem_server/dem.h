@@ -1,0 +1,276 @@
+/* dem: discrete element side of the DEM–FEM tire tread co-simulation.
+ *
+ * Spherical grains, Hertz–Mindlin contacts (normal Hertz force with a
+ * restitution-calibrated dashpot, Mindlin tangential spring with history and
+ * Coulomb cap, optional constant-torque rolling resistance), planar walls and
+ * one deformable triangle surface (the FE tire's outer skin), integrated with
+ * velocity Verlet (paper eqs. 4–5) for translation and directly in ω with a
+ * unit quaternion for orientation.
+ *
+ * Units: SI throughout (m, s, kg, N, Pa, rad).
+ *
+ * One time step is split so that the FEM step overlaps the grain–grain work:
+ *   dem_surface_update(w, node_x, node_v, err)   new surface state, BVH refit
+ *   dem_step_surface(w, err)                     gravity + walls + triangles at x(t);
+ *                                                node forces and totals ready
+ *   dem_step_grains(w, err)                      grain–grain, Verlet completion,
+ *                                                x(t) -> x(t+dt), time += dt
+ * A walls-only step is dem_step_surface then dem_step_grains (dem_step does both).
+ *
+ * Velocities: the integrator is velocity Verlet in its predictor/corrector
+ * form (paper sec. 2.1.1). Between steps a grain holds x(t+dt) and the
+ * predicted velocity v(t+dt/2) = v(t) + a(t) dt/2; the contact dashpots see
+ * that predicted velocity (as LIGGGHTS does). dem_grain_get() returns it.
+ *
+ * Errors: functions that can fail return CM_OK or a negative cm_error code and
+ * fill the caller's cm_error with a message naming the grain, step, key or file.
+ * Scene keys of the `dem` section are documented in dem_server/README.md. */
+#ifndef DEM_H
+#define DEM_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "error.h"
+
+#define DEM_MAX_MATERIALS 8
+#define DEM_MAX_WALLS 16
+
+typedef struct dem_world dem_world;
+typedef struct cm_scene cm_scene;
+
+/* ---- Materials -------------------------------------------------------- */
+
+typedef struct dem_material {
+    double density;          /* kg/m^3 (grains only; walls and the surface ignore it) */
+    double young;            /* Young's modulus E, Pa */
+    double poisson;          /* Poisson's ratio ν, [0, 0.5) */
+    double restitution;      /* requested normal coefficient of restitution e, (0, 1] */
+    double friction;         /* Coulomb sliding friction coefficient μ, >= 0 */
+    double rolling_friction; /* constant-torque rolling resistance μ_r (torque μ_r R* Fn); 0 = off */
+} dem_material;
+
+/* Pair values mix the two materials: E*, G* after Hertz/Mindlin (eqs. 21, 26),
+ * e, μ and μ_r as arithmetic means. */
+
+enum dem_damping_model {
+    /* Dashpot coefficient fitted so that the ACHIEVED restitution of a Hertz
+     * contact whose force is clamped at >= 0 equals the requested e (the
+     * non-dimensional impact equation is solved once per material pair). */
+    DEM_DAMPING_CALIBRATED = 0,
+    /* Plain ln(e) form (Tsuji 1992 / LIGGGHTS): achieved e overshoots. */
+    DEM_DAMPING_LN_E = 1
+};
+
+/* ---- World ------------------------------------------------------------ */
+
+typedef struct dem_world_def {
+    double dt;               /* time step, s */
+    double gravity[3];       /* m/s^2 */
+    int max_grains;          /* capacity; grains can be added up to it */
+    int threads;             /* OpenMP threads; 0 = OpenMP default (1 without OpenMP) */
+    double skin;             /* neighbour-list skin, m; <= 0 picks 0.3 * smallest radius */
+    int damping;             /* enum dem_damping_model */
+    double impact_velocity;  /* largest expected relative speed for the Hertz dt check, m/s */
+    double dt_safety_rayleigh; /* dt must be <= this * Rayleigh time (default 0.3) */
+    double dt_safety_hertz;    /* dt must be <= this * Hertz contact time (default 0.1) */
+    bool allow_unstable;     /* true: a dt above the limits only warns */
+    int reorder_every;       /* re-sort grains by cell every N neighbour rebuilds (0 = never) */
+} dem_world_def;
+
+dem_world_def dem_world_def_default(void);
+
+/* Materials are copied; their pair coefficients (and the damping calibration)
+ * are computed here. */
+int dem_world_create(const dem_world_def *def, int n_materials, const dem_material *materials,
+                     dem_world **out, cm_error *err);
+void dem_world_destroy(dem_world **w);
+
+/* ---- Grains ----------------------------------------------------------- */
+
+typedef struct dem_grain_state {
+    double x[3];     /* position of the centre, m */
+    double v[3];     /* velocity, m/s (predicted half-step value, see above) */
+    double w[3];     /* angular velocity, rad/s */
+    double q[4];     /* orientation quaternion (w, x, y, z) */
+    double f[3];     /* total force of the last step, N */
+    double t[3];     /* total torque of the last step, N m */
+    double radius;   /* m */
+    double mass;     /* kg */
+    int material;
+} dem_grain_state;
+
+/* Adds a grain at rest; *id (may be NULL) receives its id (0, 1, 2, ... in
+ * order of addition; ids are stable even when grains are re-sorted). */
+int dem_grain_add(dem_world *w, const double x[3], double radius, int material, int *id, cm_error *err);
+int dem_grain_count(const dem_world *w);
+int dem_grain_get(const dem_world *w, int id, dem_grain_state *s);
+/* Sets position, velocity and angular velocity (the rest of s is ignored). */
+int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], const double omega[3]);
+
+/* ---- Walls ------------------------------------------------------------ */
+
+/* An infinite plane through `point`; grains live on the side `normal` points to. */
+int dem_wall_add(dem_world *w, const double point[3], const double normal[3], int material, cm_error *err);
+
+/* ---- Triangle surface (the FE tire) ----------------------------------- */
+
+/* Installs the surface once: n_nodes positions x0 (3 n_nodes), n_tris
+ * triangles as node-index triples. Velocities start at zero. */
+int dem_surface_set(dem_world *w, int n_nodes, const double *x0, int n_tris, const int *tris, int material,
+                    cm_error *err);
+/* Lumped masses of the surface nodes (n, kg; 0 = a fixed node), so that a
+ * grain–surface contact uses the two-body effective mass of the grain and the
+ * surface point (1/m* = 1/m_grain + sum_k w_k^2 / m_k). Without it (or with
+ * NULL) the surface counts as rigid: m* = m_grain. */
+int dem_surface_set_masses(dem_world *w, const double *node_mass, cm_error *err);
+/* New node positions and velocities (3n each, world frame); refits the BVH. */
+int dem_surface_update(dem_world *w, const double *node_x, const double *node_v, cm_error *err);
+/* Reference point for the moment and unit travel direction for T_H / T_R. */
+void dem_surface_set_frame(dem_world *w, const double ref_point[3], const double travel_dir[3]);
+
+typedef struct dem_surface_total {
+    double force[3];     /* N, resultant force the grains exert ON the surface */
+    double moment[3];    /* N m, its moment about the reference point */
+    double traction_pos; /* N, T_H: sum of positive per-contact components along travel */
+    double traction_neg; /* N, T_R: sum of negative per-contact components (<= 0) */
+    int contacts;        /* grain–surface contacts after de-duplication */
+} dem_surface_total;
+
+/* Per-node forces ON the surface from the last dem_step_surface (3n, N),
+ * the contact forces distributed with barycentric weights (eq. 42). */
+const double *dem_surface_node_forces(const dem_world *w);
+void dem_surface_totals(const dem_world *w, dem_surface_total *t);
+
+/* ---- Stepping --------------------------------------------------------- */
+
+int dem_step_surface(dem_world *w, cm_error *err);
+int dem_step_grains(dem_world *w, cm_error *err);
+int dem_step(dem_world *w, cm_error *err); /* both */
+
+/* ---- Diagnostics ------------------------------------------------------ */
+
+typedef struct dem_profile {
+    double broad;     /* s, neighbour list and grid rebuilds */
+    double narrow;    /* s, grain–grain contacts */
+    double exchange;  /* s, gravity, walls and the surface (incl. BVH refit) */
+    double integrate; /* s, Verlet */
+    long rebuilds;
+} dem_profile;
+
+typedef struct dem_stats {
+    double time;          /* s */
+    long step;
+    int grains;
+    double ke_trans;      /* J */
+    double ke_rot;        /* J */
+    double pe_grav;       /* J, -m g.x summed */
+    double e_elastic;     /* J, normal Hertz energy 8/15 E* sqrt(R*) delta^(5/2) */
+    int contacts_gg, contacts_gw, contacts_gs;
+    double max_overlap;   /* largest delta / r_min of the pair */
+    dem_profile profile;
+} dem_stats;
+
+void dem_world_stats(const dem_world *w, dem_stats *s);
+/* Total force on wall k from the last step (the grains push it), N. */
+int dem_wall_force(const dem_world *w, int k, double f[3]);
+/* Contacts per grain (by id), out has dem_grain_count entries. */
+void dem_grain_contact_counts(const dem_world *w, int *out);
+/* Time-step limits for the current grains: Rayleigh time and Hertz contact
+ * time at def.impact_velocity (s). */
+void dem_time_limits(const dem_world *w, double *t_rayleigh, double *t_hertz);
+/* Dashpot factor gamma_n giving restitution e (model: enum dem_damping_model;
+ * the calibrated one is fitted to the clamped contact, see dem_contact.c). */
+double dem_damping_for_restitution(double e, int model);
+/* FNV-1a hash of all grain positions and velocities (determinism tests). */
+uint64_t dem_world_hash(const dem_world *w);
+const dem_world_def *dem_world_get_def(const dem_world *w);
+const dem_material *dem_world_material(const dem_world *w, int k);
+int dem_world_material_count(const dem_world *w);
+
+/* ---- Bed generation --------------------------------------------------- */
+
+#define DEM_MAX_LAYERS 8
+
+typedef struct dem_bed_layer {
+    int count;          /* grains in the layer */
+    double radius[2];   /* radius range [min, max], m, uniform distribution */
+} dem_bed_layer;
+
+typedef struct dem_bed_params {
+    double box_min[3], box_max[3]; /* m: floor at box_min[2], side walls at x/y limits */
+    int n_layers;                  /* listed bottom to top (paper: finest on top) */
+    dem_bed_layer layers[DEM_MAX_LAYERS];
+    int material;                  /* grain material */
+    int wall_material;
+    bool side_walls;               /* add the four side walls (the floor is always added) */
+    uint64_t seed;
+    double fill_fraction;          /* solid fraction of the loose initial placement */
+    double settle_ke;              /* J per grain: settled when KE/grain falls below */
+    double settle_min_time;        /* s, settle at least this long */
+    double settle_max_time;        /* s, fail if not settled by then */
+    double settle_dt;              /* s, step used while settling (<= 0: the world's dt) */
+    char file[1024];               /* HDF5 cache; "" = none */
+} dem_bed_params;
+
+dem_bed_params dem_bed_params_default(void);
+
+/* Progress callback during settling (may be NULL); return nonzero to abort. */
+typedef int (*dem_bed_progress)(dem_world *w, void *user);
+
+/* Fills w (which must hold no grains) with a settled bed: loads params->file
+ * when it exists and its stored parameters match, otherwise places grains
+ * randomly without overlap, lets them settle under gravity and saves the file.
+ * Adds the floor (and side walls) to w. *loaded tells which happened. */
+int dem_bed_build(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user, bool *loaded,
+                  cm_error *err);
+/* The pieces, for tests. */
+int dem_bed_place(dem_world *w, const dem_bed_params *params, cm_error *err);
+int dem_bed_settle(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user,
+                   cm_error *err);
+int dem_bed_save(const dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
+/* CM_OK when loaded, CM_ERR_STATE (no error text needed) when the file's
+ * parameters differ, another error when the file cannot be read. */
+int dem_bed_load(dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
+/* Canonical text of everything that determines a bed (materials included). */
+void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf, int len);
+/* Bed surface height, m: mean over columns (2 r_max wide) of the highest grain top. */
+double dem_bed_height(const dem_world *w);
+
+/* ---- Output ----------------------------------------------------------- */
+
+typedef struct dem_output dem_output;
+/* Opens dir/dem_grains.h5, dir/dem_grains.xmf and dir/dem_series.csv (dir is
+ * created if needed; the dem_ prefix keeps them apart from fem_server's files). */
+int dem_output_open(const char *dir, dem_output **out, cm_error *err);
+int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err);  /* grain states */
+int dem_output_series(dem_output *o, const dem_world *w, cm_error *err); /* one line of KE, contacts */
+void dem_output_close(dem_output **o);
+
+/* ---- Scene ------------------------------------------------------------ */
+
+typedef struct dem_wall_def {
+    double point[3], normal[3];
+    int material;
+} dem_wall_def;
+
+typedef struct dem_config {
+    dem_world_def world;
+    int n_materials;
+    dem_material materials[DEM_MAX_MATERIALS];
+    char material_names[DEM_MAX_MATERIALS][32];
+    int n_walls;
+    dem_wall_def walls[DEM_MAX_WALLS];
+    bool has_bed;
+    dem_bed_params bed;
+    char output_dir[1024]; /* "" = no output */
+    int output_every;      /* steps between grain frames */
+    int series_every;      /* steps between time-series lines */
+} dem_config;
+
+/* Reads the `dem = { ... }` section (only that one) of a scene. */
+int dem_config_read(cm_scene *s, dem_config *c, cm_error *err);
+/* Creates the world of a config (materials, walls; not the bed). */
+int dem_world_from_config(const dem_config *c, dem_world **out, cm_error *err);
+
+#endif

@@ -1,0 +1,456 @@
+/* Terrain: random non-overlapping placement of layered grains in a box,
+ * settling under gravity, and an HDF5 cache of the settled bed keyed by the
+ * full text of the parameters that determine it. */
+#include <errno.h>
+#include <hdf5.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "dem_world.h"
+#include "log.h"
+
+dem_bed_params dem_bed_params_default(void)
+{
+    dem_bed_params p;
+    memset(&p, 0, sizeof p);
+    p.side_walls = true;
+    p.seed = 1;
+    p.fill_fraction = 0.27;
+    p.settle_ke = 1e-7;
+    p.settle_min_time = 0.05;
+    p.settle_max_time = 3.0;
+    return p;
+}
+
+/* splitmix64: small, seedable, the same on every platform */
+static uint64_t rng_next(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+}
+static double rng_uniform(uint64_t *s) { return (double)(rng_next(s) >> 11) * (1.0 / 9007199254740992.0); }
+
+/* mean of 4/3 pi r^3 for r uniform in [a, b] */
+static double mean_volume(double a, double b)
+{
+    if (b - a < 1e-15 * b)
+        return (4.0 / 3.0) * M_PI * a * a * a;
+    return (4.0 / 3.0) * M_PI * (pow(b, 4) - pow(a, 4)) / (4.0 * (b - a));
+}
+
+int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
+{
+    if (w->g.n != 0)
+        return cm_fail(err, CM_ERR_STATE, "bed: the world already holds %d grains", w->g.n);
+    double lx = p->box_max[0] - p->box_min[0], ly = p->box_max[1] - p->box_min[1];
+    double rmax = 0.0, total_h = 0.0;
+    double hl[DEM_MAX_LAYERS];
+    long total = 0;
+    for (int k = 0; k < p->n_layers; k++) {
+        const dem_bed_layer *L = &p->layers[k];
+        rmax = fmax(rmax, L->radius[1]);
+        /* centres keep r from the side walls: fill the reachable volume */
+        double a_eff = (lx - 2 * L->radius[1]) * (ly - 2 * L->radius[1]);
+        hl[k] = L->count * mean_volume(L->radius[0], L->radius[1]) / (p->fill_fraction * a_eff) + 2 * L->radius[1];
+        total_h += hl[k];
+        total += L->count;
+        if (2.0 * L->radius[1] >= fmin(lx, ly))
+            return cm_fail(err, CM_ERR_RANGE, "bed layer %d: grains of radius %g m do not fit the %g x %g m box", k,
+                           L->radius[1], lx, ly);
+    }
+    if (total > w->g.cap)
+        return cm_fail(err, CM_ERR_RANGE, "bed: %ld grains but the world holds at most %d", total, w->g.cap);
+    /* placement grid: cells of 2 rmax, a linked list per cell */
+    double h = 2.0 * rmax;
+    int nx = (int)(lx / h) + 1, ny = (int)(ly / h) + 1, nz = (int)(total_h / h) + 1;
+    long ncell = (long)nx * ny * nz;
+    if (ncell > 200000000L)
+        return cm_fail(err, CM_ERR_RANGE, "bed: placement grid of %ld cells is too large", ncell);
+    int *head = malloc((size_t)ncell * sizeof *head);
+    int *next = malloc((size_t)total * sizeof *next);
+    double *pos = malloc((size_t)total * 4 * sizeof *pos);
+    int *mat_of = malloc((size_t)total * sizeof *mat_of);
+    if (!head || !next || !pos || !mat_of) {
+        free(head), free(next), free(pos), free(mat_of);
+        return cm_fail(err, CM_ERR_NOMEM, "bed: out of memory for %ld grains", total);
+    }
+    memset(head, 0xff, (size_t)ncell * sizeof *head);
+    uint64_t rs = p->seed * 0x2545F4914F6CDD1DULL + 1;
+    int n = 0, rc = CM_OK;
+    double z0 = p->box_min[2];
+    for (int k = 0; k < p->n_layers && rc == CM_OK; k++) {
+        const dem_bed_layer *L = &p->layers[k];
+        for (int c = 0; c < L->count; c++) {
+            double r = L->radius[0] + (L->radius[1] - L->radius[0]) * rng_uniform(&rs);
+            int placed = 0;
+            for (int tries = 0; tries < 100000 && !placed; tries++) {
+                double x = p->box_min[0] + r + (lx - 2 * r) * rng_uniform(&rs);
+                double y = p->box_min[1] + r + (ly - 2 * r) * rng_uniform(&rs);
+                double z = z0 + r + (hl[k] - 2 * r) * rng_uniform(&rs);
+                int cx = (int)((x - p->box_min[0]) / h), cy = (int)((y - p->box_min[1]) / h),
+                    cz = (int)((z - p->box_min[2]) / h);
+                int ok = 1;
+                for (int dz = -1; dz <= 1 && ok; dz++)
+                    for (int dy = -1; dy <= 1 && ok; dy++)
+                        for (int dx = -1; dx <= 1 && ok; dx++) {
+                            int X = cx + dx, Y = cy + dy, Z = cz + dz;
+                            if (X < 0 || Y < 0 || Z < 0 || X >= nx || Y >= ny || Z >= nz)
+                                continue;
+                            for (int j = head[((long)Z * ny + Y) * nx + X]; j >= 0 && ok; j = next[j]) {
+                                double ex = x - pos[4 * j], ey = y - pos[4 * j + 1], ez = z - pos[4 * j + 2];
+                                double rr = r + pos[4 * j + 3];
+                                ok = ex * ex + ey * ey + ez * ez >= rr * rr;
+                            }
+                        }
+                if (!ok)
+                    continue;
+                long cell = ((long)cz * ny + cy) * nx + cx;
+                pos[4 * n] = x, pos[4 * n + 1] = y, pos[4 * n + 2] = z, pos[4 * n + 3] = r;
+                mat_of[n] = p->material;
+                next[n] = head[cell];
+                head[cell] = n;
+                n++;
+                placed = 1;
+            }
+            if (!placed) {
+                rc = cm_fail(err, CM_ERR_RANGE,
+                             "bed layer %d: placed only %d of %d grains without overlap; lower dem.bed.fill_fraction "
+                             "(now %g)",
+                             k, c, L->count, p->fill_fraction);
+                break;
+            }
+        }
+        z0 += hl[k];
+    }
+    for (int i = 0; i < n && rc == CM_OK; i++)
+        rc = dem_grain_add(w, pos + 4 * i, pos[4 * i + 3], mat_of[i], NULL, err);
+    free(head), free(next), free(pos), free(mat_of);
+    return rc;
+}
+
+static int add_box_walls(dem_world *w, const dem_bed_params *p, cm_error *err)
+{
+    const double *lo = p->box_min, *hi = p->box_max;
+    double pts[5][3] = {{lo[0], lo[1], lo[2]}, {lo[0], lo[1], lo[2]}, {hi[0], hi[1], lo[2]}, {lo[0], lo[1], lo[2]},
+                        {hi[0], hi[1], lo[2]}};
+    double nrm[5][3] = {{0, 0, 1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
+    int n = p->side_walls ? 5 : 1;
+    for (int k = 0; k < n; k++) {
+        int rc = dem_wall_add(w, pts[k], nrm[k], p->wall_material, err);
+        if (rc)
+            return rc;
+    }
+    return CM_OK;
+}
+
+int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, cm_error *err)
+{
+    double dt_run = w->def.dt;
+    if (p->settle_dt > 0.0) {
+        w->def.dt = p->settle_dt;
+        w->prepared = 0;
+    }
+    int rc = CM_OK;
+    double ke_grain = INFINITY;
+    double t_start = w->time;
+    for (;;) {
+        for (int k = 0; k < 100 && rc == CM_OK; k++)
+            rc = dem_step(w, err);
+        if (rc) {
+            cm_fail_prefix(err, "settling the bed: ");
+            break;
+        }
+        dem_stats st;
+        dem_world_stats(w, &st);
+        ke_grain = (st.ke_trans + st.ke_rot) / (w->g.n ? w->g.n : 1);
+        if (cb && cb(w, user)) {
+            rc = cm_fail(err, CM_ERR_STATE, "settling the bed: aborted at t = %g s", w->time);
+            break;
+        }
+        double t = w->time - t_start;
+        if (t >= p->settle_min_time && ke_grain < p->settle_ke)
+            break;
+        if (t > p->settle_max_time) {
+            rc = cm_fail(err, CM_ERR_NUMERIC,
+                         "bed did not settle within settle_max_time = %g s: KE per grain %g J > settle_ke = %g J",
+                         p->settle_max_time, ke_grain, p->settle_ke);
+            break;
+        }
+    }
+    if (rc == CM_OK)
+        cm_log_info("bed settled: %d grains, t = %.4f s (%ld steps), KE/grain = %.3g J", w->g.n, w->time - t_start,
+                    w->step, ke_grain);
+    /* the settled state is the start of a run: at rest, clock at zero */
+    for (int i = 0; i < w->g.n; i++)
+        w->g.vx[i] = w->g.vy[i] = w->g.vz[i] = w->g.wx[i] = w->g.wy[i] = w->g.wz[i] = 0.0;
+    w->time = 0.0;
+    w->step = 0;
+    if (w->def.dt != dt_run) {
+        w->def.dt = dt_run;
+        w->prepared = 0;
+    }
+    return rc;
+}
+
+void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf, int len)
+{
+    int o = 0;
+#define PUT(...) (o += snprintf(buf + o, o < len ? (size_t)(len - o) : 0, __VA_ARGS__))
+    PUT("dem-bed-v1;box=%.17g,%.17g,%.17g,%.17g,%.17g,%.17g;", p->box_min[0], p->box_min[1], p->box_min[2],
+        p->box_max[0], p->box_max[1], p->box_max[2]);
+    for (int k = 0; k < p->n_layers; k++)
+        PUT("layer%d=%d:%.17g:%.17g;", k, p->layers[k].count, p->layers[k].radius[0], p->layers[k].radius[1]);
+    int mats[2] = {p->material, p->wall_material};
+    for (int k = 0; k < 2; k++) {
+        const dem_material *m = dem_world_material(w, mats[k]);
+        if (m)
+            PUT("mat%d=%.17g,%.17g,%.17g,%.17g,%.17g,%.17g;", k, m->density, m->young, m->poisson, m->restitution,
+                m->friction, m->rolling_friction);
+    }
+    const dem_world_def *d = dem_world_get_def(w);
+    PUT("side=%d;seed=%llu;fill=%.17g;ke=%.17g;tmin=%.17g;tmax=%.17g;sdt=%.17g;dt=%.17g;g=%.17g,%.17g,%.17g;damp=%d",
+        (int)p->side_walls, (unsigned long long)p->seed, p->fill_fraction, p->settle_ke, p->settle_min_time,
+        p->settle_max_time, p->settle_dt, d->dt, d->gravity[0], d->gravity[1], d->gravity[2], d->damping);
+#undef PUT
+}
+
+static uint64_t fnv1a(const char *s)
+{
+    uint64_t h = 1469598103934665603ULL;
+    for (; *s; s++) {
+        h ^= (unsigned char)*s;
+        h *= 1099511628211ULL;
+    }
+    return h;
+}
+
+/* ---- HDF5 -------------------------------------------------------------- */
+
+static int h5_write(hid_t f, const char *name, hid_t type, int rank, const hsize_t *dims, const void *data)
+{
+    hid_t sp = H5Screate_simple(rank, dims, NULL);
+    hid_t ds = H5Dcreate2(f, name, type, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    herr_t st = ds < 0 ? -1 : H5Dwrite(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data);
+    if (ds >= 0)
+        H5Dclose(ds);
+    H5Sclose(sp);
+    return st < 0 ? -1 : 0;
+}
+
+static int h5_attr_string(hid_t obj, const char *name, const char *text)
+{
+    hid_t t = H5Tcopy(H5T_C_S1);
+    H5Tset_size(t, strlen(text) + 1);
+    hid_t sp = H5Screate(H5S_SCALAR);
+    hid_t a = H5Acreate2(obj, name, t, sp, H5P_DEFAULT, H5P_DEFAULT);
+    herr_t st = a < 0 ? -1 : H5Awrite(a, t, text);
+    if (a >= 0)
+        H5Aclose(a);
+    H5Sclose(sp);
+    H5Tclose(t);
+    return st < 0 ? -1 : 0;
+}
+
+int dem_bed_save(const dem_world *w, const dem_bed_params *p, const char *path, cm_error *err)
+{
+    const dem_grains *g = &w->g;
+    int n = g->n;
+    char text[4096];
+    dem_bed_params_text(w, p, text, sizeof text);
+    double *xyz = malloc((size_t)n * 3 * sizeof *xyz), *rad = malloc((size_t)n * sizeof *rad);
+    int *mat = malloc((size_t)n * sizeof *mat);
+    if (!xyz || !rad || !mat) {
+        free(xyz), free(rad), free(mat);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
+    }
+    for (int id = 0; id < n; id++) { /* in id order: a reload gives the same ids */
+        int i = g->slot_of[id];
+        xyz[3 * id] = g->x[i], xyz[3 * id + 1] = g->y[i], xyz[3 * id + 2] = g->z[i];
+        rad[id] = g->r[i];
+        mat[id] = g->mat[i];
+    }
+    /* write to a temporary name, then rename: a crash never leaves a half bed */
+    char tmp[1100];
+    snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
+    int rc = CM_OK;
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    hid_t f = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    if (f < 0) {
+        rc = cm_fail(err, CM_ERR_IO, "%s: cannot create HDF5 file", tmp);
+    } else {
+        hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n};
+        char hs[32];
+        snprintf(hs, sizeof hs, "%016llx", (unsigned long long)fnv1a(text));
+        if (h5_write(f, "position", H5T_NATIVE_DOUBLE, 2, d2, xyz) || h5_write(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, rad) ||
+            h5_write(f, "material", H5T_NATIVE_INT, 1, d1, mat) || h5_attr_string(f, "params", text) ||
+            h5_attr_string(f, "params_hash", hs))
+            rc = cm_fail(err, CM_ERR_IO, "%s: writing the bed failed", tmp);
+        if (H5Fclose(f) < 0 && rc == CM_OK)
+            rc = cm_fail(err, CM_ERR_IO, "%s: closing failed", tmp);
+    }
+    if (rc == CM_OK && rename(tmp, path) != 0)
+        rc = cm_fail(err, CM_ERR_IO, "%s: rename from %s: %s", path, tmp, strerror(errno));
+    if (rc)
+        unlink(tmp);
+    free(xyz), free(rad), free(mat);
+    return rc;
+}
+
+static int h5_read_attr_string(hid_t obj, const char *name, char *buf, size_t len)
+{
+    hid_t a = H5Aopen(obj, name, H5P_DEFAULT);
+    if (a < 0)
+        return -1;
+    hid_t t = H5Aget_type(a);
+    size_t sz = H5Tget_size(t);
+    int rc = -1;
+    if (sz > 0 && sz <= len && H5Tget_class(t) == H5T_STRING) {
+        hid_t mt = H5Tcopy(H5T_C_S1);
+        H5Tset_size(mt, sz);
+        rc = H5Aread(a, mt, buf) < 0 ? -1 : 0;
+        buf[sz - 1] = '\0';
+        H5Tclose(mt);
+    }
+    H5Tclose(t);
+    H5Aclose(a);
+    return rc;
+}
+
+static int h5_read(hid_t f, const char *name, hid_t type, int rank, hsize_t *dims_expect, void *data)
+{
+    hid_t ds = H5Dopen2(f, name, H5P_DEFAULT);
+    if (ds < 0)
+        return -1;
+    hid_t sp = H5Dget_space(ds);
+    hsize_t dims[2] = {0, 0};
+    int ok = H5Sget_simple_extent_ndims(sp) == rank && H5Sget_simple_extent_dims(sp, dims, NULL) == rank &&
+             dims[0] == dims_expect[0] && (rank == 1 || dims[1] == dims_expect[1]);
+    herr_t st = ok ? H5Dread(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) : -1;
+    H5Sclose(sp);
+    H5Dclose(ds);
+    return st < 0 ? -1 : 0;
+}
+
+int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_error *err)
+{
+    if (w->g.n != 0)
+        return cm_fail(err, CM_ERR_STATE, "bed %s: the world already holds %d grains", path, w->g.n);
+    char want[4096], have[4096];
+    dem_bed_params_text(w, p, want, sizeof want);
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    if (f < 0)
+        return cm_fail(err, CM_ERR_IO, "%s: cannot open as HDF5", path);
+    if (h5_read_attr_string(f, "params", have, sizeof have) || strcmp(have, want) != 0) {
+        H5Fclose(f);
+        return CM_ERR_STATE; /* a different bed: the caller regenerates it */
+    }
+    long total = 0;
+    for (int k = 0; k < p->n_layers; k++)
+        total += p->layers[k].count;
+    /* the file's own size; the parameters already fix it, but check (defensive) */
+    hid_t ds = H5Dopen2(f, "radius", H5P_DEFAULT);
+    hsize_t dims[2] = {0, 3};
+    if (ds >= 0) {
+        hid_t sp = H5Dget_space(ds);
+        H5Sget_simple_extent_dims(sp, dims, NULL);
+        H5Sclose(sp);
+        H5Dclose(ds);
+    }
+    long n = (long)dims[0];
+    if (ds < 0 || n < 1 || n > total || n > w->g.cap) {
+        H5Fclose(f);
+        return cm_fail(err, CM_ERR_PARSE, "%s: radius dataset missing or of bad size %ld (expected <= %ld)", path, n,
+                       total);
+    }
+    double *xyz = malloc((size_t)n * 3 * sizeof *xyz), *rad = malloc((size_t)n * sizeof *rad);
+    int *mat = malloc((size_t)n * sizeof *mat);
+    int rc = CM_OK;
+    hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n};
+    if (!xyz || !rad || !mat)
+        rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
+    else if (h5_read(f, "position", H5T_NATIVE_DOUBLE, 2, d2, xyz) || h5_read(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, rad) ||
+             h5_read(f, "material", H5T_NATIVE_INT, 1, d1, mat))
+        rc = cm_fail(err, CM_ERR_PARSE, "%s: position/radius/material datasets unreadable", path);
+    H5Fclose(f);
+    for (long i = 0; i < n && rc == CM_OK; i++) {
+        if (!isfinite(xyz[3 * i]) || !isfinite(xyz[3 * i + 1]) || !isfinite(xyz[3 * i + 2]) || !(rad[i] > 0.0))
+            rc = cm_fail(err, CM_ERR_PARSE, "%s: grain %ld has a bad position or radius", path, i);
+        else
+            rc = dem_grain_add(w, xyz + 3 * i, rad[i], mat[i], NULL, err);
+        if (rc && err)
+            cm_fail_prefix(err, "%s: ", path);
+    }
+    free(xyz), free(rad), free(mat);
+    return rc;
+}
+
+int dem_bed_build(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, bool *loaded, cm_error *err)
+{
+    *loaded = false;
+    int rc = add_box_walls(w, p, err);
+    if (rc)
+        return rc;
+    if (p->file[0] && access(p->file, R_OK) == 0) {
+        rc = dem_bed_load(w, p, p->file, err);
+        if (rc == CM_OK) {
+            *loaded = true;
+            cm_log_info("bed loaded from %s (%d grains)", p->file, w->g.n);
+            return CM_OK;
+        }
+        if (rc != CM_ERR_STATE)
+            return rc;
+        cm_log_info("bed file %s holds a bed of other parameters: regenerating", p->file);
+    }
+    if ((rc = dem_bed_place(w, p, err)) || (rc = dem_bed_settle(w, p, cb, user, err)))
+        return rc;
+    if (p->file[0]) {
+        rc = dem_bed_save(w, p, p->file, err);
+        if (rc == CM_OK)
+            cm_log_info("bed saved to %s", p->file);
+    }
+    return rc;
+}
+
+double dem_bed_height(const dem_world *w)
+{
+    /* mean over columns (2 r_max square, covering the grains' footprint) of
+     * the highest grain top in each column */
+    const dem_grains *g = &w->g;
+    int n = g->n;
+    if (n == 0)
+        return 0.0;
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY}, rmax = 0.0;
+    for (int i = 0; i < n; i++) {
+        lo[0] = fmin(lo[0], g->x[i]), hi[0] = fmax(hi[0], g->x[i]);
+        lo[1] = fmin(lo[1], g->y[i]), hi[1] = fmax(hi[1], g->y[i]);
+        rmax = fmax(rmax, g->r[i]);
+    }
+    double h = 2.0 * rmax;
+    int nx = (int)((hi[0] - lo[0]) / h) + 1, ny = (int)((hi[1] - lo[1]) / h) + 1;
+    if ((long)nx * ny > 100000000L)
+        return NAN;
+    double *top = malloc((size_t)nx * ny * sizeof *top);
+    if (!top)
+        return NAN;
+    for (long k = 0; k < (long)nx * ny; k++)
+        top[k] = -INFINITY;
+    for (int i = 0; i < n; i++) {
+        int cx = (int)((g->x[i] - lo[0]) / h), cy = (int)((g->y[i] - lo[1]) / h);
+        double t = g->z[i] + g->r[i];
+        if (t > top[(long)cy * nx + cx])
+            top[(long)cy * nx + cx] = t;
+    }
+    double s = 0.0;
+    int m = 0;
+    for (long k = 0; k < (long)nx * ny; k++)
+        if (isfinite(top[k]))
+            s += top[k], m++;
+    free(top);
+    return s / m;
+}

@@ -1,0 +1,110 @@
+/* Hertz–Mindlin contact law (paper sec. 2.2), shared by grain–grain,
+ * grain–wall and grain–triangle contacts.
+ *
+ * Conventions: n is the unit normal pointing from the other body to grain i
+ * (eq. 10), delta > 0 the overlap (eq. 18), vrel the velocity of i's contact
+ * point relative to the other body's (eq. 12). The returned force acts on i. */
+#ifndef DEM_CONTACT_H
+#define DEM_CONTACT_H
+
+#include <math.h>
+
+#include "dem.h"
+#include "vec3.h"
+
+/* Coefficients of one material pair. */
+typedef struct dem_pair_coef {
+    double E;       /* E*, Pa: 1/E* = (1-ν1²)/E1 + (1-ν2²)/E2 (eq. 21) */
+    double G;       /* G*, Pa: 1/G* = (2-ν1)/G1 + (2-ν2)/G2 (eq. 26 in its standard form) */
+    double gamma_n; /* dimensionless dashpot factor: F_d = gamma_n sqrt(S_n m*) d(delta)/dt */
+    double gamma_t; /* same for the tangential dashpot with S_t */
+    double mu;      /* Coulomb friction */
+    double mu_roll; /* rolling resistance (constant torque) */
+    double e;       /* requested restitution */
+    double st_sn;   /* sqrt(S_t / S_n) = sqrt(4 G* / E*), saves a sqrt per contact */
+} dem_pair_coef;
+
+void dem_pair_coef_make(const dem_material *a, const dem_material *b, dem_pair_coef *c);
+
+/* Achieved restitution of the clamped Hertz impact for a dashpot factor
+ * gamma_n (solved in non-dimensional form, independent of speed and size). */
+double dem_restitution_achieved(double gamma_n);
+
+/* Normal and tangential force on i.
+ *   R, m : effective radius and mass (eqs. 16, 17; R = r_i, m = m_i for a wall)
+ *   xi   : accumulated tangential spring displacement (history, eq. 20), m
+ *   fn   : out, magnitude of the normal force (>= 0)
+ * Normal (eq. 22 with the standard coefficient): with a = sqrt(R delta),
+ *   S_n = 2 E* a,  F_n = 4/3 E* sqrt(R) delta^(3/2) + gamma_n sqrt(S_n m) d(delta)/dt,
+ * clamped at >= 0 (no tension). The paper's eq. 23 drops the factor 2 of S_n
+ * and the sqrt(5/6): we use the standard Tsuji/LIGGGHTS form
+ *   gamma_n = -2 sqrt(5/6) ln e / sqrt(ln² e + π²)
+ * or the calibrated one (dem_contact.c).
+ * Tangential (eqs. 20, 24, 25): the spring xi is rotated into the current
+ * tangent plane (magnitude kept), incremented by v_t dt, and
+ *   F_t = -S_t xi - gamma_t sqrt(S_t m) v_t,  S_t = 8 G* a,
+ * capped by μ F_n; on sliding the spring is rescaled to carry the capped force
+ * alone, xi = -F_t / S_t (Luding 2008). LIGGGHTS instead stores
+ * xi = -(F_t + c_t v_t)/S_t; when the dashpot alone exceeds the cap (early in
+ * a fast oblique impact) that spring points the wrong way and the friction
+ * force changes sign: the oblique-impact test loses 17 % of the impulse. */
+static inline vec3 dem_hm_force(const dem_pair_coef *c, vec3 n, double delta, double R, double m, vec3 vrel,
+                                double dt, double xi[3], double *fn)
+{
+    double a = sqrt(R * delta);
+    double sn = 2.0 * c->E * a;
+    double st = 8.0 * c->G * a; /* eq. 25 */
+    double vn = v3_dot(vrel, n);  /* < 0 approaching: d(delta)/dt = -vn */
+    double f_el = (2.0 / 3.0) * sn * delta; /* = 4/3 E* sqrt(R) delta^(3/2) */
+    double sq = sqrt(sn * m);
+    double f_n = f_el - c->gamma_n * sq * vn;
+    if (f_n < 0.0)
+        f_n = 0.0;
+    *fn = f_n;
+
+    vec3 vt = v3_sub(vrel, v3_scale(n, vn)); /* eq. 14 */
+    vec3 s = v3_load(xi);
+    double s2 = v3_norm2(s);
+    if (s2 > 0.0) {
+        /* rotate the stored spring into the current tangent plane */
+        vec3 sp = v3_sub(s, v3_scale(n, v3_dot(s, n)));
+        double sp2 = v3_norm2(sp);
+        s = sp2 > 0.0 ? v3_scale(sp, sqrt(s2 / sp2)) : sp;
+    }
+    s = v3_axpy(dt, vt, s);
+    double ct = c->gamma_t * c->st_sn * sq; /* gamma_t sqrt(S_t m) */
+    vec3 ft = v3_sub(v3_scale(s, -st), v3_scale(vt, ct));
+    double ft2 = v3_norm2(ft);
+    double fmax = c->mu * f_n;
+    if (ft2 > fmax * fmax) {
+        double k = ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0;
+        ft = v3_scale(ft, k);
+        s = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
+    }
+    v3_store(xi, s);
+    return v3_add(v3_scale(n, f_n), ft);
+}
+
+/* Constant-torque rolling resistance on i: -μ_r R F_n ω_rel/|ω_rel|, limited
+ * so that it cannot reverse ω_rel within one step (i_eff: effective moment of
+ * inertia of the pair, kg m²). */
+static inline vec3 dem_rolling_torque(const dem_pair_coef *c, double R, double fn, vec3 wrel, double i_eff,
+                                      double dt)
+{
+    double wn = v3_norm(wrel);
+    if (c->mu_roll <= 0.0 || wn <= 0.0)
+        return v3(0, 0, 0);
+    double t = c->mu_roll * R * fn;
+    double tmax = i_eff * wn / dt;
+    if (t > tmax)
+        t = tmax;
+    return v3_scale(wrel, -t / wn);
+}
+
+/* Normal elastic energy stored in a Hertz contact, J. */
+static inline double dem_hertz_energy(const dem_pair_coef *c, double R, double delta)
+{
+    return (8.0 / 15.0) * c->E * sqrt(R) * pow(delta, 2.5);
+}
+
+#endif

@@ -1,0 +1,279 @@
+/* dem_server: the granular terrain side of the co-simulation.
+ *
+ *   dem_server --scene FILE --shm NAME [--out DIR] [--threads N]   coupled with fem_server
+ *   dem_server --scene FILE --standalone [--out DIR] [--threads N] walls only, e.g. to settle a bed
+ *
+ * Builds the world of the scene's `dem` section: materials, walls, the
+ * settled bed (reloaded from dem.bed.file when its parameters match, settled
+ * and saved otherwise) and any explicitly placed grains (dem.grains). Then,
+ * coupled, exchanges with the FEM side until run.end_time (dem_coupled.c);
+ * stand-alone, steps to run.end_time with walls only (0 = just the bed).
+ *
+ * The coupling keys of the `dem` section, besides dem_server/README.md's:
+ *   surface_material = "tread";   material of the exchanged surface (the tire)
+ *   grains = ( { position = [x, y, z]; velocity = [vx, vy, vz];  m, m/s
+ *                radius = r; material = "soil"; }, ... );           m
+ * The time step is coupling.dt (dem.dt, if given, must agree with it). */
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "dem.h"
+#include "dem_coupled.h"
+#include "log.h"
+#include "runcfg.h"
+#include "scene.h"
+#include "timer.h"
+
+static volatile sig_atomic_t g_stop;
+static void on_signal(int sig) { g_stop = sig; }
+
+typedef struct options {
+    const char *scene, *shm, *out;
+    int threads;
+    int standalone;
+} options;
+
+typedef struct output_ctx {
+    const dem_config *cfg;
+    dem_output *out;
+    long last_frame, last_series;
+    int failed;
+    cm_error err;
+} output_ctx;
+
+/* Writes grain frames and series lines at the configured step intervals. */
+static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
+{
+    if (!c->out)
+        return CM_OK;
+    dem_stats s;
+    dem_world_stats(w, &s);
+    int rc;
+    if (s.step - c->last_series >= c->cfg->series_every) {
+        c->last_series = s.step;
+        if ((rc = dem_output_series(c->out, w, err)))
+            return rc;
+    }
+    if (s.step - c->last_frame >= c->cfg->output_every) {
+        c->last_frame = s.step;
+        if ((rc = dem_output_frame(c->out, w, err)))
+            return rc;
+    }
+    return CM_OK;
+}
+
+static int settle_progress(dem_world *w, void *user)
+{
+    output_ctx *c = user;
+    if (write_outputs(w, c, &c->err))
+        return c->failed = 1;
+    dem_stats s;
+    dem_world_stats(w, &s);
+    if (s.step % 10000 == 0)
+        cm_log_info("settling: t = %.4f s, KE/grain = %.3g J, contacts %d", s.time,
+                    (s.ke_trans + s.ke_rot) / (s.grains ? s.grains : 1), s.contacts_gg + s.contacts_gw);
+    return g_stop != 0;
+}
+
+static int after_exchange(dem_world *w, void *user, long exchange, cm_error *err)
+{
+    (void)exchange;
+    return write_outputs(w, user, err);
+}
+
+static int material_index(cm_scene *s, const dem_config *cfg, const char *key, int *out, cm_error *err)
+{
+    char name[64];
+    int rc = cm_scene_string(s, key, name, sizeof name, err);
+    if (rc)
+        return rc;
+    for (int k = 0; k < cfg->n_materials; k++)
+        if (strcmp(cfg->material_names[k], name) == 0) {
+            *out = k;
+            return CM_OK;
+        }
+    return cm_fail(err, CM_ERR_KEY, "%s: %s = \"%s\" is not a material listed in dem.materials", cm_scene_path(s),
+                   key, name);
+}
+
+/* dem.grains: grains placed by hand (verification scenes). */
+static int add_listed_grains(cm_scene *s, const dem_config *cfg, dem_world *w, cm_error *err)
+{
+    int n = cm_scene_length(s, "dem.grains");
+    for (int i = 0; i < n; i++) {
+        char key[128];
+        double x[3], v[3] = {0, 0, 0}, omega[3] = {0, 0, 0}, r;
+        int mat = 0, id = 0, rc;
+#define GKEY(k) (snprintf(key, sizeof key, "dem.grains.[%d]." k, i), key)
+        if ((rc = cm_scene_doubles(s, GKEY("position"), 3, -1e6, 1e6, x, err)) ||
+            (rc = cm_scene_doubles_opt(s, GKEY("velocity"), 3, -1e4, 1e4, v, v, err)) ||
+            (rc = cm_scene_doubles_opt(s, GKEY("angular_velocity"), 3, -1e6, 1e6, omega, omega, err)) ||
+            (rc = cm_scene_double(s, GKEY("radius"), 1e-9, 100.0, &r, err)) ||
+            (rc = material_index(s, cfg, GKEY("material"), &mat, err)) ||
+            (rc = dem_grain_add(w, x, r, mat, &id, err)))
+            return rc;
+#undef GKEY
+        dem_grain_set(w, id, x, v, omega);
+    }
+    return CM_OK;
+}
+
+static int run(const options *o)
+{
+    cm_error err = {0};
+    cm_scene *scene = NULL;
+    dem_world *w = NULL;
+    output_ctx octx = {0};
+    cm_run_config rcfg;
+    dem_config cfg;
+    int surface_material = 0, exit_code = 1, rc;
+
+    if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
+        (rc = dem_config_read(scene, &cfg, &err)))
+        goto fail;
+    if (cm_scene_has(scene, "dem.surface_material") &&
+        (rc = material_index(scene, &cfg, "dem.surface_material", &surface_material, &err)))
+        goto fail;
+    if (cfg.world.dt != rcfg.dt) {
+        rc = cm_fail(&err, CM_ERR_KEY, "%s: dem.dt = %g s differs from coupling.dt = %g s (give only coupling.dt)",
+                     o->scene, cfg.world.dt, rcfg.dt);
+        goto fail;
+    }
+    if (o->threads > 0)
+        cfg.world.threads = o->threads;
+    if (o->out)
+        snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
+    cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
+    if ((rc = dem_world_from_config(&cfg, &w, &err)))
+        goto fail;
+
+    octx.cfg = &cfg;
+    if (cfg.output_dir[0] && (rc = dem_output_open(cfg.output_dir, &octx.out, &err)))
+        goto fail;
+    double t0 = cm_now(), bed_height = 0, bed_top = 0;
+    if (cfg.has_bed) {
+        bool loaded = false;
+        rc = dem_bed_build(w, &cfg.bed, settle_progress, &octx, &loaded, &err);
+        if (rc && octx.failed)
+            err = octx.err;
+        if (rc)
+            goto fail;
+        bed_height = dem_bed_height(w);
+        for (int id = 0; id < dem_grain_count(w); id++) {
+            dem_grain_state g;
+            dem_grain_get(w, id, &g);
+            bed_top = g.x[2] + g.radius > bed_top ? g.x[2] + g.radius : bed_top;
+        }
+        cm_log_info("%s bed of %d grains, surface at z = %.4f m (%.1f s)", loaded ? "loaded" : "settled",
+                    dem_grain_count(w), bed_height, cm_now() - t0);
+    }
+    if ((rc = add_listed_grains(scene, &cfg, w, &err)))
+        goto fail;
+    /* Every key is read: now a leftover is a typo. */
+    cm_scene_mark_known(scene, "fem");
+    cm_scene_mark_known(scene, "wheel");
+    static const char *const sections[] = {"run", "coupling", "dem", NULL};
+    if ((rc = cm_scene_check_unknown(scene, sections, &err)))
+        goto fail;
+    if (dem_grain_count(w) == 0) {
+        rc = cm_fail(&err, CM_ERR_KEY, "%s: no grains (give dem.bed or dem.grains)", o->scene);
+        goto fail;
+    }
+    double t_rayleigh, t_hertz;
+    dem_time_limits(w, &t_rayleigh, &t_hertz);
+    cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s)", dem_grain_count(w),
+                rcfg.dt, t_rayleigh, t_hertz);
+
+    if (o->standalone) {
+        long steps = (long)(rcfg.end_time / rcfg.dt + 0.5);
+        double last = cm_now();
+        for (long k = 0; k < steps && !g_stop; k++) {
+            if ((rc = dem_step(w, &err)) || (rc = write_outputs(w, &octx, &err)))
+                goto fail;
+            if (rcfg.progress_every > 0 && cm_now() - last > rcfg.progress_every) {
+                last = cm_now();
+                cm_log_info("t = %.4f s (%ld of %ld steps)", (k + 1) * rcfg.dt, k + 1, steps);
+            }
+        }
+        exit_code = g_stop ? 128 + (int)g_stop : 0;
+    } else {
+        dem_coupled_def def = {.shm = o->shm,
+                               .dt = rcfg.dt,
+                               .exchange_every = rcfg.exchange_every,
+                               .end_time = rcfg.end_time,
+                               .stall_timeout = rcfg.stall_timeout,
+                               .connect_timeout = rcfg.connect_timeout,
+                               .progress_every = rcfg.progress_every,
+                               .surface_material = surface_material,
+                               .bed_height = bed_height,
+                               .bed_top = bed_top,
+                               .stop_flag = &g_stop};
+        dem_coupled_hooks hooks = {.after_exchange = after_exchange, .user = &octx};
+        rc = dem_run_coupled(w, &def, &hooks, &err);
+        if (rc == DEM_COUPLED_PEER) {
+            cm_log_error("%s", err.msg);
+            exit_code = g_stop ? 128 + (int)g_stop : 3;
+            goto cleanup;
+        }
+        if (rc)
+            goto fail;
+        exit_code = 0;
+    }
+    dem_stats s;
+    dem_world_stats(w, &s);
+    cm_log_info("profile: broad %.2f s (%ld rebuilds), narrow %.2f s, exchange %.2f s, integrate %.2f s",
+                s.profile.broad, s.profile.rebuilds, s.profile.narrow, s.profile.exchange, s.profile.integrate);
+    goto cleanup;
+fail:
+    cm_log_error("%s", err.msg);
+    exit_code = 1;
+cleanup:
+    dem_output_close(&octx.out);
+    dem_world_destroy(&w);
+    cm_scene_close(&scene);
+    return exit_code;
+}
+
+static int usage(void)
+{
+    fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
+                    "  The granular side of the co-simulation; run both servers with ./run SCENE.\n");
+    return 2;
+}
+
+int main(int argc, char **argv)
+{
+    options o = {0};
+    for (int i = 1; i < argc; i++) {
+        const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
+        if (strcmp(a, "--scene") == 0 && v)
+            o.scene = v, i++;
+        else if (strcmp(a, "--shm") == 0 && v)
+            o.shm = v, i++;
+        else if (strcmp(a, "--out") == 0 && v)
+            o.out = v, i++;
+        else if (strcmp(a, "--threads") == 0 && v)
+            o.threads = atoi(v), i++;
+        else if (strcmp(a, "--standalone") == 0)
+            o.standalone = 1;
+        else
+            return usage();
+    }
+    if (!o.scene || (!o.shm && !o.standalone))
+        return usage();
+    cm_log_set_tag("dem");
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    if (o.out && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
+        cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
+        return 1;
+    }
+    return run(&o);
+}

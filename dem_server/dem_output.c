@@ -1,0 +1,197 @@
+/* Grain-state output: one HDF5 file with a group per frame, an XDMF file
+ * beside it that ParaView opens as a time series of Polyvertex grids
+ * (position, velocity, radius, angular velocity, contact count), and a CSV
+ * time series of energies and contact counts. Not in the hot loop: buffers
+ * are allocated per frame. */
+#include <errno.h>
+#include <hdf5.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "dem_world.h"
+
+struct dem_output {
+    char dir[1024];
+    hid_t h5;
+    FILE *series;
+    int n_frames, cap_frames;
+    double *times;
+    int *counts;
+};
+
+int dem_output_open(const char *dir, dem_output **out, cm_error *err)
+{
+    *out = NULL;
+    if (mkdir(dir, 0777) != 0 && errno != EEXIST)
+        return cm_fail(err, CM_ERR_IO, "%s: cannot create output folder: %s", dir, strerror(errno));
+    dem_output *o = calloc(1, sizeof *o);
+    if (!o)
+        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", dir);
+    snprintf(o->dir, sizeof o->dir, "%s", dir);
+    char path[1100];
+    snprintf(path, sizeof path, "%s/dem_grains.h5", dir);
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    o->h5 = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    if (o->h5 < 0) {
+        free(o);
+        return cm_fail(err, CM_ERR_IO, "%s: cannot create HDF5 file", path);
+    }
+    snprintf(path, sizeof path, "%s/dem_series.csv", dir);
+    o->series = fopen(path, "w");
+    if (!o->series) {
+        H5Fclose(o->h5);
+        free(o);
+        return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
+    }
+    fprintf(o->series, "time_s,step,ke_trans_J,ke_rot_J,contacts_grain,contacts_wall,contacts_surface,max_overlap\n");
+    *out = o;
+    return CM_OK;
+}
+
+static int write_ds(hid_t grp, const char *name, hid_t type, int n, int cols, const void *data)
+{
+    hsize_t dims[2] = {(hsize_t)n, (hsize_t)cols};
+    hid_t sp = H5Screate_simple(cols > 1 ? 2 : 1, dims, NULL);
+    hid_t ds = H5Dcreate2(grp, name, type, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    herr_t st = ds < 0 ? -1 : H5Dwrite(ds, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, data);
+    if (ds >= 0)
+        H5Dclose(ds);
+    H5Sclose(sp);
+    return st < 0 ? -1 : 0;
+}
+
+static int write_xdmf(const dem_output *o, cm_error *err)
+{
+    char path[1100], tmp[1200];
+    snprintf(path, sizeof path, "%s/dem_grains.xmf", o->dir);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *f = fopen(tmp, "w");
+    if (!f)
+        return cm_fail(err, CM_ERR_IO, "%s: %s", tmp, strerror(errno));
+    fprintf(f, "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n <Domain>\n"
+               "  <Grid Name=\"grains\" GridType=\"Collection\" CollectionType=\"Temporal\">\n");
+    for (int k = 0; k < o->n_frames; k++) {
+        int n = o->counts[k];
+        fprintf(f, "   <Grid Name=\"frame_%06d\" GridType=\"Uniform\">\n    <Time Value=\"%.9g\"/>\n", k, o->times[k]);
+        fprintf(f, "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"%d\"/>\n", n);
+        fprintf(f, "    <Geometry GeometryType=\"XYZ\">\n     <DataItem Dimensions=\"%d 3\" NumberType=\"Float\" "
+                   "Precision=\"8\" Format=\"HDF\">dem_grains.h5:/frame_%06d/position</DataItem>\n    </Geometry>\n", n, k);
+        const char *vec[] = {"velocity", "angular_velocity"};
+        for (int a = 0; a < 2; a++)
+            fprintf(f, "    <Attribute Name=\"%s\" AttributeType=\"Vector\" Center=\"Node\">\n     <DataItem "
+                       "Dimensions=\"%d 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">dem_grains.h5:/frame_%06d/%s"
+                       "</DataItem>\n    </Attribute>\n", vec[a], n, k, vec[a]);
+        fprintf(f, "    <Attribute Name=\"radius\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
+                   "Dimensions=\"%d\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">dem_grains.h5:/frame_%06d/radius"
+                   "</DataItem>\n    </Attribute>\n", n, k);
+        fprintf(f, "    <Attribute Name=\"contacts\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
+                   "Dimensions=\"%d\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">dem_grains.h5:/frame_%06d/contacts"
+                   "</DataItem>\n    </Attribute>\n   </Grid>\n", n, k);
+    }
+    fprintf(f, "  </Grid>\n </Domain>\n</Xdmf>\n");
+    if (fclose(f) != 0 || rename(tmp, path) != 0)
+        return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
+    return CM_OK;
+}
+
+int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
+{
+    const dem_grains *g = &w->g;
+    int n = g->n;
+    if (o->n_frames == o->cap_frames) {
+        int cap = o->cap_frames ? 2 * o->cap_frames : 64;
+        double *t = realloc(o->times, (size_t)cap * sizeof *t);
+        if (t)
+            o->times = t;
+        int *c = realloc(o->counts, (size_t)cap * sizeof *c);
+        if (c)
+            o->counts = c;
+        if (!t || !c)
+            return cm_fail(err, CM_ERR_NOMEM, "output frame %d: out of memory", o->n_frames);
+        o->cap_frames = cap;
+    }
+    double *buf = malloc((size_t)n * 9 * sizeof *buf), *rad = malloc((size_t)n * sizeof *rad);
+    int *cnt = malloc((size_t)n * sizeof *cnt);
+    int rc = CM_OK;
+    if (!buf || !rad || !cnt) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "output frame %d: out of memory", o->n_frames);
+        goto done;
+    }
+    for (int id = 0; id < n; id++) {
+        int i = g->slot_of[id];
+        double *b = buf + 9 * id; /* staged as three n x 3 blocks below */
+        b[0] = g->x[i], b[1] = g->y[i], b[2] = g->z[i];
+        b[3] = g->vx[i], b[4] = g->vy[i], b[5] = g->vz[i];
+        b[6] = g->wx[i], b[7] = g->wy[i], b[8] = g->wz[i];
+        rad[id] = g->r[i];
+    }
+    dem_grain_contact_counts(w, cnt);
+    double *blk = malloc((size_t)n * 3 * sizeof *blk);
+    if (!blk) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "output frame %d: out of memory", o->n_frames);
+        goto done;
+    }
+    char name[64];
+    snprintf(name, sizeof name, "frame_%06d", o->n_frames);
+    hid_t grp = H5Gcreate2(o->h5, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    const char *names[3] = {"position", "velocity", "angular_velocity"};
+    int bad = grp < 0;
+    for (int a = 0; a < 3 && !bad; a++) {
+        for (int i = 0; i < n; i++)
+            for (int k = 0; k < 3; k++)
+                blk[3 * i + k] = buf[9 * i + 3 * a + k];
+        bad = write_ds(grp, names[a], H5T_NATIVE_DOUBLE, n, 3, blk);
+    }
+    if (!bad)
+        bad = write_ds(grp, "radius", H5T_NATIVE_DOUBLE, n, 1, rad) || write_ds(grp, "contacts", H5T_NATIVE_INT, n, 1, cnt);
+    if (!bad) {
+        hid_t sp = H5Screate(H5S_SCALAR);
+        hid_t at = H5Acreate2(grp, "time", H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
+        bad = at < 0 || H5Awrite(at, H5T_NATIVE_DOUBLE, &w->time) < 0;
+        if (at >= 0)
+            H5Aclose(at);
+        H5Sclose(sp);
+    }
+    if (grp >= 0)
+        H5Gclose(grp);
+    free(blk);
+    if (bad || H5Fflush(o->h5, H5F_SCOPE_GLOBAL) < 0) {
+        rc = cm_fail(err, CM_ERR_IO, "%s/dem_grains.h5: writing %s failed", o->dir, name);
+        goto done;
+    }
+    o->times[o->n_frames] = w->time;
+    o->counts[o->n_frames] = n;
+    o->n_frames++;
+    rc = write_xdmf(o, err);
+done:
+    free(buf), free(rad), free(cnt);
+    return rc;
+}
+
+int dem_output_series(dem_output *o, const dem_world *w, cm_error *err)
+{
+    dem_stats s;
+    dem_world_stats(w, &s);
+    if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g\n", s.time, s.step, s.ke_trans, s.ke_rot, s.contacts_gg,
+                s.contacts_gw, s.contacts_gs, s.max_overlap) < 0 ||
+        fflush(o->series) != 0)
+        return cm_fail(err, CM_ERR_IO, "%s/dem_series.csv: write failed", o->dir);
+    return CM_OK;
+}
+
+void dem_output_close(dem_output **op)
+{
+    dem_output *o = *op;
+    if (!o)
+        return;
+    if (o->h5 >= 0)
+        H5Fclose(o->h5);
+    if (o->series)
+        fclose(o->series);
+    free(o->times);
+    free(o->counts);
+    free(o);
+    *op = NULL;
+}

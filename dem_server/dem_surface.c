@@ -1,0 +1,518 @@
+#include "dem_surface.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dem_contact.h"
+#include "dem_world.h"
+#include "vec3.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+int dem_closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
+                            double bary[3], double cp[3])
+{
+    vec3 A = v3_load(a), B = v3_load(b), C = v3_load(c), P = v3_load(p);
+    vec3 ab = v3_sub(B, A), ac = v3_sub(C, A), ap = v3_sub(P, A);
+    double u, v, w;
+    int region;
+    double d1 = v3_dot(ab, ap), d2 = v3_dot(ac, ap);
+    vec3 bp = v3_sub(P, B);
+    double d3 = v3_dot(ab, bp), d4 = v3_dot(ac, bp);
+    vec3 cpv = v3_sub(P, C);
+    double d5 = v3_dot(ab, cpv), d6 = v3_dot(ac, cpv);
+    double vc = d1 * d4 - d3 * d2, vb = d5 * d2 - d1 * d6, va = d3 * d6 - d5 * d4;
+    if (d1 <= 0.0 && d2 <= 0.0) {
+        u = 1, v = 0, w = 0, region = 4;
+    } else if (d3 >= 0.0 && d4 <= d3) {
+        u = 0, v = 1, w = 0, region = 5;
+    } else if (d6 >= 0.0 && d5 <= d6) {
+        u = 0, v = 0, w = 1, region = 6;
+    } else if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+        v = d1 / (d1 - d3), u = 1.0 - v, w = 0, region = 1;
+    } else if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+        w = d2 / (d2 - d6), u = 1.0 - w, v = 0, region = 3;
+    } else if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6)), v = 1.0 - w, u = 0, region = 2;
+    } else if (va + vb + vc > 0.0) {
+        double den = 1.0 / (va + vb + vc);
+        v = vb * den, w = vc * den, u = 1.0 - v - w, region = 0;
+    } else { /* degenerate (zero-area) triangle: its first vertex */
+        u = 1, v = 0, w = 0, region = 4;
+    }
+    bary[0] = u, bary[1] = v, bary[2] = w;
+    /* the contact point IS the barycentric combination, so that node forces
+     * w_k F reproduce the contact's moment exactly (eq. 42) */
+    for (int k = 0; k < 3; k++)
+        cp[k] = u * a[k] + v * b[k] + w * c[k];
+    return region;
+}
+
+/* ---- BVH --------------------------------------------------------------- */
+
+static void tri_bounds(const dem_surface *s, int t, double lo[3], double hi[3])
+{
+    const int *n = s->tri + 3 * t;
+    for (int k = 0; k < 3; k++) {
+        double a = s->x[3 * n[0] + k], b = s->x[3 * n[1] + k], c = s->x[3 * n[2] + k];
+        lo[k] = fmin(a, fmin(b, c));
+        hi[k] = fmax(a, fmax(b, c));
+    }
+}
+
+static double centroid(const dem_surface *s, int t, int k)
+{
+    const int *n = s->tri + 3 * t;
+    return (s->x[3 * n[0] + k] + s->x[3 * n[1] + k] + s->x[3 * n[2] + k]) / 3.0;
+}
+
+/* in-place median split of perm[lo..hi) on centroid axis (simple quickselect) */
+static void select_median(const dem_surface *s, int *perm, int lo, int hi, int kth, int axis)
+{
+    while (hi - lo > 1) {
+        double pivot = centroid(s, perm[(lo + hi) / 2], axis);
+        int i = lo, j = hi - 1;
+        while (i <= j) {
+            while (centroid(s, perm[i], axis) < pivot)
+                i++;
+            while (centroid(s, perm[j], axis) > pivot)
+                j--;
+            if (i <= j) {
+                int t = perm[i];
+                perm[i] = perm[j];
+                perm[j] = t;
+                i++;
+                j--;
+            }
+        }
+        if (kth <= j)
+            hi = j + 1;
+        else if (kth >= i)
+            lo = i;
+        else
+            return;
+    }
+}
+
+static int bvh_build(dem_surface *s, int lo, int hi)
+{
+    int node = s->n_bvh++;
+    dem_bvh_node *nd = &s->bvh[node];
+    nd->right = -1;
+    nd->first = lo;
+    nd->count = hi - lo;
+    if (hi - lo <= 2)
+        return node;
+    double clo[3] = {INFINITY, INFINITY, INFINITY}, chi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = lo; i < hi; i++)
+        for (int k = 0; k < 3; k++) {
+            double c = centroid(s, s->perm[i], k);
+            clo[k] = fmin(clo[k], c);
+            chi[k] = fmax(chi[k], c);
+        }
+    int axis = 0;
+    for (int k = 1; k < 3; k++)
+        if (chi[k] - clo[k] > chi[axis] - clo[axis])
+            axis = k;
+    int mid = (lo + hi) / 2;
+    select_median(s, s->perm, lo, hi, mid, axis);
+    bvh_build(s, lo, mid);
+    int r = bvh_build(s, mid, hi);
+    s->bvh[node].right = r;
+    s->bvh[node].count = 0;
+    return node;
+}
+
+void dem_surface_refit(dem_surface *s)
+{
+    for (int i = s->n_bvh - 1; i >= 0; i--) {
+        dem_bvh_node *nd = &s->bvh[i];
+        if (nd->right < 0) {
+            tri_bounds(s, s->perm[nd->first], nd->lo, nd->hi);
+            for (int t = 1; t < nd->count; t++) {
+                double lo[3], hi[3];
+                tri_bounds(s, s->perm[nd->first + t], lo, hi);
+                for (int k = 0; k < 3; k++) {
+                    nd->lo[k] = fmin(nd->lo[k], lo[k]);
+                    nd->hi[k] = fmax(nd->hi[k], hi[k]);
+                }
+            }
+        } else {
+            const dem_bvh_node *a = &s->bvh[i + 1], *b = &s->bvh[nd->right];
+            for (int k = 0; k < 3; k++) {
+                nd->lo[k] = fmin(a->lo[k], b->lo[k]);
+                nd->hi[k] = fmax(a->hi[k], b->hi[k]);
+            }
+        }
+    }
+}
+
+int dem_surface_grow(dem_surface *s, int grain_cap)
+{
+    size_t sz = (size_t)grain_cap * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+    double *h = realloc(s->hist, sz * sizeof *h);
+    if (!h)
+        return CM_ERR_NOMEM;
+    s->hist = h;
+    memset(h, 0, sz * sizeof *h);
+    return CM_OK;
+}
+
+int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tris, int material, int grain_cap,
+                       int n_threads, dem_surface **out, cm_error *err)
+{
+    *out = NULL;
+    if (n_nodes < 3 || n_tris < 1)
+        return cm_fail(err, CM_ERR_RANGE, "dem_surface_set: %d nodes, %d triangles", n_nodes, n_tris);
+    for (int t = 0; t < n_tris; t++)
+        for (int k = 0; k < 3; k++)
+            if (tris[3 * t + k] < 0 || tris[3 * t + k] >= n_nodes)
+                return cm_fail(err, CM_ERR_RANGE, "dem_surface_set: triangle %d node %d out of range [0, %d)",
+                               t, tris[3 * t + k], n_nodes);
+    for (int i = 0; i < 3 * n_nodes; i++)
+        if (!isfinite(x0[i]))
+            return cm_fail(err, CM_ERR_NUMERIC, "dem_surface_set: node %d position is not finite", i / 3);
+    dem_surface *s = calloc(1, sizeof *s);
+    if (!s)
+        return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory");
+    s->n_nodes = n_nodes;
+    s->n_tris = n_tris;
+    s->material = material;
+    s->n_threads = n_threads;
+    s->overflow_grain = -1;
+    s->x = malloc(3 * (size_t)n_nodes * sizeof *s->x);
+    s->v = calloc(3 * (size_t)n_nodes, sizeof *s->v);
+    s->node_f = calloc(3 * (size_t)n_nodes, sizeof *s->node_f);
+    s->tri = malloc(3 * (size_t)n_tris * sizeof *s->tri);
+    s->bvh = calloc(2 * (size_t)n_tris + 1, sizeof *s->bvh);
+    s->perm = malloc((size_t)n_tris * sizeof *s->perm);
+    s->ttot = calloc((size_t)n_threads, sizeof *s->ttot);
+    s->tnode_f = n_threads > 1 ? calloc((size_t)(n_threads - 1) * 3 * (size_t)n_nodes, sizeof(double)) : NULL;
+    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || !s->ttot ||
+        (n_threads > 1 && !s->tnode_f) || dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
+        dem_surface_free(&s);
+        return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
+    }
+    memcpy(s->x, x0, 3 * (size_t)n_nodes * sizeof *s->x);
+    memcpy(s->tri, tris, 3 * (size_t)n_tris * sizeof *s->tri);
+    for (int t = 0; t < n_tris; t++)
+        s->perm[t] = t;
+    bvh_build(s, 0, n_tris);
+    dem_surface_refit(s);
+    s->travel[0] = 1.0;
+    *out = s;
+    return CM_OK;
+}
+
+void dem_surface_free(dem_surface **sp)
+{
+    dem_surface *s = *sp;
+    if (!s)
+        return;
+    free(s->x);
+    free(s->v);
+    free(s->node_f);
+    free(s->inv_mass);
+    free(s->tri);
+    free(s->bvh);
+    free(s->perm);
+    free(s->hist);
+    free(s->ttot);
+    free(s->tnode_f);
+    free(s);
+    *sp = NULL;
+}
+
+/* ---- contacts ---------------------------------------------------------- */
+
+typedef struct cand {
+    int tri, region;
+    double bary[3], p[3], d2;
+    int keep;
+} cand;
+
+static int tri_has_node(const int *t, int node) { return t[0] == node || t[1] == node || t[2] == node; }
+
+/* Nodes of the feature (edge or vertex) a candidate's closest point lies on. */
+static int cand_feature(const dem_surface *s, const cand *c, int nodes[2])
+{
+    const int *t = s->tri + 3 * c->tri;
+    switch (c->region) {
+    case 1: nodes[0] = t[0], nodes[1] = t[1]; return 2;
+    case 2: nodes[0] = t[1], nodes[1] = t[2]; return 2;
+    case 3: nodes[0] = t[2], nodes[1] = t[0]; return 2;
+    case 4: nodes[0] = t[0]; return 1;
+    case 5: nodes[0] = t[1]; return 1;
+    case 6: nodes[0] = t[2]; return 1;
+    default: return 0;
+    }
+}
+
+/* Contacts of one grain (slot i) with the surface; returns the number kept.
+ * De-duplication: the contact points that count are the local minima of the
+ * distance from the grain centre to the whole surface. A face point always is
+ * one. An edge (vertex) point is not when another triangle containing that
+ * edge (vertex) is strictly closer — the distance keeps falling into it — so
+ * those are dropped. Of the rest, points that coincide (the same edge or
+ * vertex reported by each of its triangles, or a face point on an edge) are
+ * merged, deepest first. A grain on a flat triangulated plane then has exactly
+ * one contact wherever it sits. */
+static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, int *overflow)
+{
+    int n = 0, stack[64], sp = 0;
+    double lo[3] = {c.x - r, c.y - r, c.z - r}, hi[3] = {c.x + r, c.y + r, c.z + r};
+    stack[sp++] = 0;
+    double p[3] = {c.x, c.y, c.z};
+    while (sp > 0) {
+        const dem_bvh_node *nd = &s->bvh[stack[--sp]];
+        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] ||
+            nd->lo[2] > hi[2] || nd->hi[2] < lo[2])
+            continue;
+        if (nd->right >= 0) {
+            if (sp + 2 > 64) {
+                *overflow = 1;
+                continue;
+            }
+            stack[sp++] = nd->right;
+            stack[sp++] = (int)(nd - s->bvh) + 1;
+            continue;
+        }
+        for (int k = 0; k < nd->count; k++) {
+            int t = s->perm[nd->first + k];
+            const int *tn = s->tri + 3 * t;
+            cand q;
+            q.region = dem_closest_on_triangle(p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], q.bary, q.p);
+            double dx = p[0] - q.p[0], dy = p[1] - q.p[1], dz = p[2] - q.p[2];
+            q.d2 = dx * dx + dy * dy + dz * dz;
+            if (q.d2 >= r * r)
+                continue;
+            if (n == DEM_SURF_MAX_CAND) {
+                *overflow = 1;
+                continue;
+            }
+            q.tri = t;
+            q.keep = 1;
+            cd[n++] = q;
+        }
+    }
+    /* drop edge/vertex points that are not local minima */
+    double tol = 1e-12 * r * r;
+    for (int a = 0; a < n; a++) {
+        int nodes[2];
+        int nf = cand_feature(s, &cd[a], nodes);
+        if (nf == 0)
+            continue;
+        for (int b = 0; b < n && cd[a].keep; b++) {
+            if (b == a || !(cd[b].d2 < cd[a].d2 - tol))
+                continue;
+            const int *tb = s->tri + 3 * cd[b].tri;
+            if (tri_has_node(tb, nodes[0]) && (nf == 1 || tri_has_node(tb, nodes[1])))
+                cd[a].keep = 0;
+        }
+    }
+    /* compact, sort by depth (insertion sort, stable: ties keep BVH order) */
+    int m = 0;
+    for (int a = 0; a < n; a++)
+        if (cd[a].keep)
+            cd[m++] = cd[a];
+    for (int a = 1; a < m; a++) {
+        cand t = cd[a];
+        int b = a - 1;
+        while (b >= 0 && (cd[b].d2 > t.d2 || (cd[b].d2 == t.d2 && cd[b].tri > t.tri))) {
+            cd[b + 1] = cd[b];
+            b--;
+        }
+        cd[b + 1] = t;
+    }
+    /* merge coincident points */
+    double mtol = 1e-6 * r;
+    int k = 0;
+    for (int a = 0; a < m; a++) {
+        int dup = 0;
+        for (int b = 0; b < k && !dup; b++) {
+            double dx = cd[a].p[0] - cd[b].p[0], dy = cd[a].p[1] - cd[b].p[1], dz = cd[a].p[2] - cd[b].p[2];
+            dup = dx * dx + dy * dy + dz * dz < mtol * mtol;
+        }
+        if (!dup)
+            cd[k++] = cd[a];
+    }
+    return k;
+}
+
+int dem_surface_contacts(dem_world *w, cm_error *err)
+{
+    dem_surface *s = w->surf;
+    dem_grains *g = &w->g;
+    const int nt = w->n_threads;
+    const double dt = w->def.dt;
+    const int nn3 = 3 * s->n_nodes;
+    memset(s->node_f, 0, (size_t)nn3 * sizeof *s->node_f);
+    if (nt > 1)
+        memset(s->tnode_f, 0, (size_t)(nt - 1) * (size_t)nn3 * sizeof *s->tnode_f);
+    memset(s->ttot, 0, (size_t)nt * sizeof *s->ttot);
+    s->overflow_grain = -1;
+    const dem_bvh_node *root = &s->bvh[0];
+    const vec3 ref = v3_load(s->ref), dir = v3_load(s->travel);
+    int overflow_slot = -1;
+
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+#ifdef _OPENMP
+        int tid = omp_get_thread_num();
+#else
+        int tid = 0;
+#endif
+        int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
+        double *nf = tid == 0 ? s->node_f : s->tnode_f + (size_t)(tid - 1) * (size_t)nn3;
+        dem_surface_total *tot = &s->ttot[tid];
+        cand cd[DEM_SURF_MAX_CAND];
+        for (int i = lo; i < hi; i++) {
+            double r = g->r[i];
+            vec3 c = v3(g->x[i], g->y[i], g->z[i]);
+            double *hs = s->hist + (size_t)i * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+            g->surf_count[i] = 0;
+            int any_hist = 0;
+            for (int k = 0; k < DEM_SURF_SLOTS; k++)
+                any_hist |= hs[k * DEM_SURF_SLOT_SIZE + 6] != 0.0;
+            if (root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r ||
+                root->hi[1] < c.y - r || root->lo[2] > c.z + r || root->hi[2] < c.z - r) {
+                if (any_hist)
+                    memset(hs, 0, DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE * sizeof *hs);
+                continue;
+            }
+            int overflow = 0;
+            int m = grain_candidates(s, c, r, cd, &overflow);
+            if (overflow) {
+#ifdef _OPENMP
+#pragma omp critical(dem_surface_overflow)
+#endif
+                if (overflow_slot < 0 || i < overflow_slot)
+                    overflow_slot = i;
+            }
+            int taken[DEM_SURF_SLOTS] = {0};
+            int slot_of[DEM_SURF_MAX_CAND];
+            vec3 nrm[DEM_SURF_MAX_CAND];
+            for (int a = 0; a < m; a++) {
+                double d = sqrt(cd[a].d2);
+                if (d > 1e-12 * r) {
+                    nrm[a] = v3_scale(v3(c.x - cd[a].p[0], c.y - cd[a].p[1], c.z - cd[a].p[2]), 1.0 / d);
+                } else { /* centre on the surface: use the face normal */
+                    const int *tn = s->tri + 3 * cd[a].tri;
+                    vec3 A = v3_load(s->x + 3 * tn[0]), B = v3_load(s->x + 3 * tn[1]), C = v3_load(s->x + 3 * tn[2]);
+                    nrm[a] = v3_unit(v3_cross(v3_sub(B, A), v3_sub(C, A)));
+                }
+                /* history slot: the used one with the closest normal */
+                int best = -1;
+                double bd = 0.7;
+                for (int k = 0; k < DEM_SURF_SLOTS; k++) {
+                    const double *h = hs + k * DEM_SURF_SLOT_SIZE;
+                    if (taken[k] || h[6] == 0.0)
+                        continue;
+                    double dd = nrm[a].x * h[3] + nrm[a].y * h[4] + nrm[a].z * h[5];
+                    if (dd > bd)
+                        bd = dd, best = k;
+                }
+                slot_of[a] = best;
+                if (best >= 0)
+                    taken[best] = 1;
+            }
+            for (int a = 0; a < m; a++) /* new contacts take free slots */
+                if (slot_of[a] < 0)
+                    for (int k = 0; k < DEM_SURF_SLOTS; k++)
+                        if (!taken[k]) {
+                            double *h = hs + k * DEM_SURF_SLOT_SIZE;
+                            h[0] = h[1] = h[2] = 0.0;
+                            taken[k] = 1;
+                            slot_of[a] = k;
+                            break;
+                        }
+            for (int k = 0; k < DEM_SURF_SLOTS; k++)
+                if (!taken[k])
+                    memset(hs + k * DEM_SURF_SLOT_SIZE, 0, DEM_SURF_SLOT_SIZE * sizeof *hs);
+
+            const dem_pair_coef *cf = &w->coef[g->mat[i]][s->material];
+            double m_i = 1.0 / g->inv_m[i];
+            vec3 vi = v3(g->vx[i], g->vy[i], g->vz[i]), wi = v3(g->wx[i], g->wy[i], g->wz[i]);
+            vec3 fsum = v3(0, 0, 0), tsum = v3(0, 0, 0);
+            for (int a = 0; a < m; a++) {
+                const int *tn = s->tri + 3 * cd[a].tri;
+                const double *bw = cd[a].bary;
+                vec3 vs = v3(0, 0, 0);
+                for (int k = 0; k < 3; k++)
+                    vs = v3_axpy(bw[k], v3_load(s->v + 3 * tn[k]), vs);
+                vec3 p = v3_load(cd[a].p);
+                vec3 lever = v3_sub(p, c);
+                vec3 vrel = v3_sub(v3_add(vi, v3_cross(wi, lever)), vs);
+                double xi_tmp[3] = {0, 0, 0};
+                double *xi = slot_of[a] >= 0 ? hs + slot_of[a] * DEM_SURF_SLOT_SIZE : xi_tmp;
+                /* Effective mass of the pair: the grain and the surface point,
+                 * whose apparent mass under a force spread with weights w_k
+                 * is 1 / sum(w_k^2 / m_k). With the grain's mass alone the
+                 * dashpot over-damps light FE nodes and the explicit exchange
+                 * goes unstable (c dt / m_node > 2). */
+                double m_pair = m_i;
+                if (s->inv_mass) {
+                    double inv_ms = 0.0;
+                    for (int k = 0; k < 3; k++)
+                        inv_ms += bw[k] * bw[k] * s->inv_mass[tn[k]];
+                    m_pair = 1.0 / (1.0 / m_i + inv_ms);
+                }
+                double fn;
+                vec3 F = dem_hm_force(cf, nrm[a], r - sqrt(cd[a].d2), r, m_pair, vrel, dt, xi, &fn);
+                if (slot_of[a] >= 0) {
+                    v3_store(xi + 3, nrm[a]);
+                    xi[6] = 1.0;
+                }
+                fsum = v3_add(fsum, F);
+                tsum = v3_add(tsum, v3_cross(lever, F));
+                tsum = v3_add(tsum, dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+                /* reaction on the surface, to the nodes by barycentric weights (eq. 42) */
+                vec3 Fs = v3_scale(F, -1.0);
+                for (int k = 0; k < 3; k++) {
+                    double *f = nf + 3 * tn[k];
+                    f[0] += bw[k] * Fs.x;
+                    f[1] += bw[k] * Fs.y;
+                    f[2] += bw[k] * Fs.z;
+                }
+                v3_store(tot->force, v3_add(v3_load(tot->force), Fs));
+                v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_cross(v3_sub(p, ref), Fs)));
+                double along = v3_dot(Fs, dir);
+                if (along > 0.0)
+                    tot->traction_pos += along;
+                else
+                    tot->traction_neg += along;
+                tot->contacts++;
+            }
+            g->surf_count[i] = m;
+            g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;
+            g->tx[i] += tsum.x, g->ty[i] += tsum.y, g->tz[i] += tsum.z;
+        }
+    }
+    /* merge per-thread results in thread order: deterministic for a given
+     * thread count */
+    for (int t = 1; t < nt; t++) {
+        const double *src = s->tnode_f + (size_t)(t - 1) * (size_t)nn3;
+        for (int k = 0; k < nn3; k++)
+            s->node_f[k] += src[k];
+    }
+    memset(&s->tot, 0, sizeof s->tot);
+    for (int t = 0; t < nt; t++) {
+        for (int k = 0; k < 3; k++) {
+            s->tot.force[k] += s->ttot[t].force[k];
+            s->tot.moment[k] += s->ttot[t].moment[k];
+        }
+        s->tot.traction_pos += s->ttot[t].traction_pos;
+        s->tot.traction_neg += s->ttot[t].traction_neg;
+        s->tot.contacts += s->ttot[t].contacts;
+    }
+    if (overflow_slot >= 0)
+        return cm_fail(err, CM_ERR_RANGE,
+                       "step %ld: grain %d touches more than %d surface triangles (mesh much finer than the grain)",
+                       w->step, g->id[overflow_slot], DEM_SURF_MAX_CAND);
+    return CM_OK;
+}

@@ -1,0 +1,63 @@
+/* The FE tire's outer surface as seen by the grains: linear triangles over
+ * moving nodes, a bounding-volume tree over them (paper sec. 4.2, refitted
+ * when the nodes move), sphere–triangle closest points (sec. 4.3) and the
+ * barycentric distribution of contact forces to the nodes (eq. 42). */
+#ifndef DEM_SURFACE_H
+#define DEM_SURFACE_H
+
+#include "dem.h"
+
+typedef struct dem_world dem_world;
+
+/* Tree node; its left child is the next node, `right` the other one (-1 for a
+ * leaf, whose triangles are perm[first .. first+count)). Children always have
+ * larger indices than their parent, so a reverse sweep refits the tree. */
+typedef struct dem_bvh_node {
+    double lo[3], hi[3];
+    int right, first, count, pad;
+} dem_bvh_node;
+
+/* Tangential history per (grain, surface): up to DEM_SURF_SLOTS simultaneous
+ * contacts of one grain with the surface (a grain in a tread groove), matched
+ * step to step by their normal, so that a spring survives the contact point
+ * crossing a triangle edge. */
+#define DEM_SURF_SLOTS 4
+#define DEM_SURF_SLOT_SIZE 7 /* xi[3], n[3], used */
+/* Candidate triangles per grain (overflow is reported as an error). */
+#define DEM_SURF_MAX_CAND 64
+
+typedef struct dem_surface {
+    int n_nodes, n_tris, material;
+    double *x, *v;   /* 3 n_nodes */
+    double *node_f;  /* 3 n_nodes, forces ON the surface */
+    double *inv_mass;/* n_nodes, 1/kg; NULL: the surface is rigid (infinite mass) */
+    int *tri;        /* 3 n_tris */
+    int n_bvh;
+    dem_bvh_node *bvh;
+    int *perm;
+    double *hist;    /* DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE per grain slot */
+    double ref[3], travel[3];
+    dem_surface_total tot;
+    int n_threads;
+    double *tnode_f;          /* (n_threads - 1) * 3 n_nodes */
+    dem_surface_total *ttot;  /* n_threads */
+    int overflow_grain;       /* id of a grain with too many candidates, or -1 */
+} dem_surface;
+
+/* Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision
+ * Detection 5.1.5). Fills barycentric weights and the point itself as
+ * bary[0] a + bary[1] b + bary[2] c. Returns the region:
+ * 0 face, 1 edge ab, 2 edge bc, 3 edge ca, 4 vertex a, 5 vertex b, 6 vertex c. */
+int dem_closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
+                            double bary[3], double cp[3]);
+
+int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tris, int material, int grain_cap,
+                       int n_threads, dem_surface **out, cm_error *err);
+void dem_surface_free(dem_surface **s);
+void dem_surface_refit(dem_surface *s);
+int dem_surface_grow(dem_surface *s, int grain_cap);
+/* Grain–triangle contacts at the current positions: forces and torques
+ * added to the grains, node forces and totals of the surface refilled. */
+int dem_surface_contacts(dem_world *w, cm_error *err);
+
+#endif

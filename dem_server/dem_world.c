@@ -1,0 +1,1003 @@
+/* The world and its time step, read top-down as a pipeline:
+ *   dem_step_surface: clear forces -> gravity -> walls -> triangle surface
+ *   dem_step_grains:  grain–grain (neighbour list) -> merge thread buffers
+ *                     -> Verlet (eqs. 4–5), ω and quaternion -> neighbour
+ *                     list rebuild when a grain moved more than skin/2
+ * Each phase is timed into w->prof. */
+#include "dem_world.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "timer.h"
+#include "vec3.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+dem_world_def dem_world_def_default(void)
+{
+    dem_world_def d;
+    memset(&d, 0, sizeof d);
+    d.dt = 1e-5;
+    d.gravity[2] = -9.81;
+    d.max_grains = 1000;
+    d.threads = 1;
+    d.skin = 0.0;
+    d.damping = DEM_DAMPING_CALIBRATED;
+    d.impact_velocity = 1.0;
+    d.dt_safety_rayleigh = 0.3;
+    d.dt_safety_hertz = 0.1;
+    d.allow_unstable = false;
+    d.reorder_every = 20;
+    return d;
+}
+
+static int check_material(const dem_material *m, int k, cm_error *err)
+{
+    if (!(m->young > 0.0) || !(m->poisson >= 0.0 && m->poisson < 0.5) || !(m->restitution > 0.0 && m->restitution <= 1.0) ||
+        !(m->friction >= 0.0) || !(m->rolling_friction >= 0.0) || !(m->density >= 0.0))
+        return cm_fail(err, CM_ERR_RANGE,
+                       "material %d: need E > 0, 0 <= nu < 0.5, 0 < e <= 1, mu >= 0, mu_r >= 0, density >= 0 "
+                       "(E = %g, nu = %g, e = %g, mu = %g, mu_r = %g, density = %g)",
+                       k, m->young, m->poisson, m->restitution, m->friction, m->rolling_friction, m->density);
+    return CM_OK;
+}
+
+static void *xcalloc(size_t n, size_t sz, int *bad)
+{
+    void *p = calloc(n ? n : 1, sz);
+    if (!p)
+        *bad = 1;
+    return p;
+}
+
+int dem_world_create(const dem_world_def *def, int n_materials, const dem_material *materials, dem_world **out,
+                     cm_error *err)
+{
+    *out = NULL;
+    if (n_materials < 1 || n_materials > DEM_MAX_MATERIALS)
+        return cm_fail(err, CM_ERR_RANGE, "dem_world_create: %d materials (1..%d)", n_materials, DEM_MAX_MATERIALS);
+    if (!(def->dt > 0.0) || def->max_grains < 1)
+        return cm_fail(err, CM_ERR_RANGE, "dem_world_create: dt = %g s, max_grains = %d", def->dt, def->max_grains);
+    for (int k = 0; k < n_materials; k++) {
+        int rc = check_material(&materials[k], k, err);
+        if (rc)
+            return rc;
+    }
+    dem_world *w = calloc(1, sizeof *w);
+    if (!w)
+        return cm_fail(err, CM_ERR_NOMEM, "dem_world_create: out of memory");
+    w->def = *def;
+    w->n_mat = n_materials;
+    memcpy(w->mat, materials, (size_t)n_materials * sizeof *materials);
+    /* pair coefficients; the damping calibration (a few ms) is done once
+     * per distinct pair restitution */
+    double memo_e[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], memo_g[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
+    int n_memo = 0;
+    for (int a = 0; a < n_materials; a++)
+        for (int b = 0; b < n_materials; b++) {
+            dem_pair_coef *c = &w->coef[a][b];
+            dem_pair_coef_make(&materials[a], &materials[b], c);
+            int k = 0;
+            while (k < n_memo && memo_e[k] != c->e)
+                k++;
+            if (k == n_memo) {
+                memo_e[k] = c->e;
+                memo_g[k] = dem_damping_for_restitution(c->e, def->damping);
+                n_memo++;
+            }
+            c->gamma_n = memo_g[k];
+            c->gamma_t = memo_g[k]; /* eq. 27 in its standard form: same factor with S_t */
+        }
+#ifdef _OPENMP
+    w->n_threads = def->threads > 0 ? def->threads : omp_get_max_threads();
+#else
+    w->n_threads = 1;
+#endif
+    int cap = def->max_grains, bad = 0;
+    dem_grains *g = &w->g;
+    g->cap = cap;
+    double **dbl[] = {&g->x, &g->y, &g->z, &g->vx, &g->vy, &g->vz, &g->wx, &g->wy, &g->wz, &g->fx, &g->fy, &g->fz,
+                      &g->tx, &g->ty, &g->tz, &g->r, &g->inv_m, &g->inv_i, &g->x0, &g->y0, &g->z0};
+    for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+        *dbl[k] = xcalloc((size_t)cap, sizeof(double), &bad);
+    g->q = xcalloc(4 * (size_t)cap, sizeof(double), &bad);
+    g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * 3, sizeof(double), &bad);
+    g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
+    g->id = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->surf_count = xcalloc((size_t)cap, sizeof(int), &bad);
+    w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
+    w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
+    w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
+    for (int t = 1; t < w->n_threads && !bad; t++)
+        w->tb[t].f = xcalloc(6 * (size_t)cap, sizeof(double), &bad);
+    if (bad) {
+        dem_world_destroy(&w);
+        return cm_fail(err, CM_ERR_NOMEM, "dem_world_create: out of memory for %d grains", cap);
+    }
+    w->need_rebuild = 1;
+    *out = w;
+    return CM_OK;
+}
+
+void dem_world_destroy(dem_world **wp)
+{
+    dem_world *w = *wp;
+    if (!w)
+        return;
+    dem_grains *g = &w->g;
+    double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
+                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0};
+    for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+        free(dbl[k]);
+    free(g->q);
+    free(g->wall_hist);
+    free(g->mat);
+    free(g->wall_mask);
+    free(g->id);
+    free(g->slot_of);
+    free(g->surf_count);
+    free(w->grain_cell);
+    free(w->cell_start);
+    free(w->cell_items);
+    free(w->pi);
+    free(w->pj);
+    free(w->hist_val[0]);
+    free(w->hist_val[1]);
+    dem_hash_free(&w->hist[0]);
+    dem_hash_free(&w->hist[1]);
+    if (w->tb)
+        for (int t = 1; t < w->n_threads; t++)
+            free(w->tb[t].f);
+    free(w->tb);
+    free(w->scratch);
+    free(w->cell_pos);
+    dem_surface_free(&w->surf);
+    free(w);
+    *wp = NULL;
+}
+
+const dem_world_def *dem_world_get_def(const dem_world *w) { return &w->def; }
+const dem_material *dem_world_material(const dem_world *w, int k)
+{
+    return k >= 0 && k < w->n_mat ? &w->mat[k] : NULL;
+}
+int dem_world_material_count(const dem_world *w) { return w->n_mat; }
+
+/* ---- grains ------------------------------------------------------------ */
+
+int dem_grain_add(dem_world *w, const double x[3], double radius, int material, int *id, cm_error *err)
+{
+    dem_grains *g = &w->g;
+    if (g->n >= g->cap)
+        return cm_fail(err, CM_ERR_RANGE, "dem_grain_add: world is full (max_grains = %d)", g->cap);
+    if (!(radius > 0.0) || material < 0 || material >= w->n_mat || !isfinite(x[0]) || !isfinite(x[1]) ||
+        !isfinite(x[2]))
+        return cm_fail(err, CM_ERR_RANGE, "dem_grain_add: grain %d: radius %g, material %d (of %d)", g->n, radius,
+                       material, w->n_mat);
+    if (!(w->mat[material].density > 0.0))
+        return cm_fail(err, CM_ERR_RANGE, "dem_grain_add: material %d has no density", material);
+    int i = g->n++;
+    g->x[i] = x[0], g->y[i] = x[1], g->z[i] = x[2];
+    g->vx[i] = g->vy[i] = g->vz[i] = 0.0;
+    g->wx[i] = g->wy[i] = g->wz[i] = 0.0;
+    g->fx[i] = g->fy[i] = g->fz[i] = g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
+    double m = w->mat[material].density * (4.0 / 3.0) * M_PI * radius * radius * radius;
+    g->r[i] = radius;
+    g->inv_m[i] = 1.0 / m;
+    g->inv_i[i] = 1.0 / (0.4 * m * radius * radius);
+    g->mat[i] = material;
+    g->q[4 * i] = 1.0, g->q[4 * i + 1] = g->q[4 * i + 2] = g->q[4 * i + 3] = 0.0;
+    g->id[i] = i;
+    g->slot_of[i] = i;
+    memset(g->wall_hist + (size_t)i * w->wall_stride * 3, 0, (size_t)w->wall_stride * 3 * sizeof(double));
+    g->wall_mask[i] = 0;
+    g->surf_count[i] = 0;
+    w->need_rebuild = 1;
+    w->prepared = 0;
+    if (id)
+        *id = i;
+    return CM_OK;
+}
+
+int dem_grain_count(const dem_world *w) { return w->g.n; }
+
+int dem_grain_get(const dem_world *w, int id, dem_grain_state *s)
+{
+    const dem_grains *g = &w->g;
+    if (id < 0 || id >= g->n)
+        return CM_ERR_RANGE;
+    int i = g->slot_of[id];
+    s->x[0] = g->x[i], s->x[1] = g->y[i], s->x[2] = g->z[i];
+    s->v[0] = g->vx[i], s->v[1] = g->vy[i], s->v[2] = g->vz[i];
+    s->w[0] = g->wx[i], s->w[1] = g->wy[i], s->w[2] = g->wz[i];
+    s->f[0] = g->fx[i], s->f[1] = g->fy[i], s->f[2] = g->fz[i];
+    s->t[0] = g->tx[i], s->t[1] = g->ty[i], s->t[2] = g->tz[i];
+    memcpy(s->q, g->q + 4 * i, 4 * sizeof(double));
+    s->radius = g->r[i];
+    s->mass = 1.0 / g->inv_m[i];
+    s->material = g->mat[i];
+    return CM_OK;
+}
+
+int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], const double omega[3])
+{
+    dem_grains *g = &w->g;
+    if (id < 0 || id >= g->n)
+        return CM_ERR_RANGE;
+    int i = g->slot_of[id];
+    if (x) {
+        g->x[i] = x[0], g->y[i] = x[1], g->z[i] = x[2];
+        w->need_rebuild = 1;
+    }
+    if (v)
+        g->vx[i] = v[0], g->vy[i] = v[1], g->vz[i] = v[2];
+    if (omega)
+        g->wx[i] = omega[0], g->wy[i] = omega[1], g->wz[i] = omega[2];
+    return CM_OK;
+}
+
+/* Moves grain data so that slot k holds the grain previously in order[k]. */
+void dem_grains_permute(dem_world *w, const int *order)
+{
+    dem_grains *g = &w->g;
+    int n = g->n;
+    double *tmp = w->scratch; /* cap * DEM_SCRATCH_PER_GRAIN doubles: no allocation in the loop */
+    double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
+                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0};
+    for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++) {
+        for (int i = 0; i < n; i++)
+            tmp[i] = dbl[k][order[i]];
+        memcpy(dbl[k], tmp, (size_t)n * sizeof *tmp);
+    }
+    int *itmp = (int *)tmp;
+    int *ints[] = {g->mat, g->id, g->surf_count};
+    for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++) {
+        for (int i = 0; i < n; i++)
+            itmp[i] = ints[k][order[i]];
+        memcpy(ints[k], itmp, (size_t)n * sizeof *itmp);
+    }
+    uint32_t *utmp = (uint32_t *)tmp;
+    for (int i = 0; i < n; i++)
+        utmp[i] = g->wall_mask[order[i]];
+    memcpy(g->wall_mask, utmp, (size_t)n * sizeof *utmp);
+    for (int i = 0; i < n; i++)
+        memcpy(tmp + 4 * i, g->q + 4 * order[i], 4 * sizeof *tmp);
+    memcpy(g->q, tmp, 4 * (size_t)n * sizeof *tmp);
+    const size_t wh = (size_t)w->wall_stride * 3;
+    for (int i = 0; i < n; i++)
+        memcpy(tmp + wh * i, g->wall_hist + wh * order[i], wh * sizeof *tmp);
+    memcpy(g->wall_hist, tmp, wh * (size_t)n * sizeof *tmp);
+    if (w->surf) {
+        const size_t sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+        for (int i = 0; i < n; i++)
+            memcpy(tmp + sh * i, w->surf->hist + sh * order[i], sh * sizeof *tmp);
+        memcpy(w->surf->hist, tmp, sh * (size_t)n * sizeof *tmp);
+    }
+    for (int i = 0; i < n; i++)
+        g->slot_of[g->id[i]] = i;
+}
+
+/* ---- walls ------------------------------------------------------------- */
+
+int dem_wall_add(dem_world *w, const double point[3], const double normal[3], int material, cm_error *err)
+{
+    if (w->n_walls >= DEM_MAX_WALLS)
+        return cm_fail(err, CM_ERR_RANGE, "dem_wall_add: at most %d walls", DEM_MAX_WALLS);
+    if (material < 0 || material >= w->n_mat)
+        return cm_fail(err, CM_ERR_RANGE, "dem_wall_add: wall %d: material %d (of %d)", w->n_walls, material, w->n_mat);
+    vec3 n = v3_load(normal);
+    double nn = v3_norm(n);
+    if (!(nn > 0.0) || !isfinite(nn))
+        return cm_fail(err, CM_ERR_RANGE, "dem_wall_add: wall %d: zero or non-finite normal", w->n_walls);
+    dem_wall *wl = &w->walls[w->n_walls++];
+    memset(wl, 0, sizeof *wl);
+    memcpy(wl->p, point, sizeof wl->p);
+    v3_store(wl->n, v3_scale(n, 1.0 / nn));
+    wl->material = material;
+    w->prepared = 0;
+    return CM_OK;
+}
+
+int dem_wall_force(const dem_world *w, int k, double f[3])
+{
+    if (k < 0 || k >= w->n_walls)
+        return CM_ERR_RANGE;
+    memcpy(f, w->walls[k].force, 3 * sizeof *f);
+    return CM_OK;
+}
+
+/* ---- surface ----------------------------------------------------------- */
+
+int dem_surface_set(dem_world *w, int n_nodes, const double *x0, int n_tris, const int *tris, int material,
+                    cm_error *err)
+{
+    if (material < 0 || material >= w->n_mat)
+        return cm_fail(err, CM_ERR_RANGE, "dem_surface_set: material %d (of %d)", material, w->n_mat);
+    dem_surface_free(&w->surf);
+    w->prepared = 0;
+    return dem_surface_create(n_nodes, x0, n_tris, tris, material, w->g.cap, w->n_threads, &w->surf, err);
+}
+
+int dem_surface_set_masses(dem_world *w, const double *node_mass, cm_error *err)
+{
+    dem_surface *s = w->surf;
+    if (!s)
+        return cm_fail(err, CM_ERR_STATE, "dem_surface_set_masses: no surface installed");
+    if (!node_mass) {
+        free(s->inv_mass);
+        s->inv_mass = NULL;
+        return CM_OK;
+    }
+    double *inv = malloc((size_t)s->n_nodes * sizeof *inv);
+    if (!inv)
+        return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set_masses: out of memory");
+    for (int k = 0; k < s->n_nodes; k++) {
+        if (!(node_mass[k] >= 0.0) || !isfinite(node_mass[k])) {
+            free(inv);
+            return cm_fail(err, CM_ERR_NUMERIC, "dem_surface_set_masses: node %d has mass %g", k, node_mass[k]);
+        }
+        inv[k] = node_mass[k] > 0.0 ? 1.0 / node_mass[k] : 0.0; /* 0: a fixed node */
+    }
+    free(s->inv_mass);
+    s->inv_mass = inv;
+    return CM_OK;
+}
+
+int dem_surface_update(dem_world *w, const double *node_x, const double *node_v, cm_error *err)
+{
+    dem_surface *s = w->surf;
+    if (!s)
+        return cm_fail(err, CM_ERR_STATE, "dem_surface_update at step %ld: no surface installed", w->step);
+    int n3 = 3 * s->n_nodes;
+    /* data from the other process: check before use */
+    for (int k = 0; k < n3; k++)
+        if (!isfinite(node_x[k]) || (node_v && !isfinite(node_v[k])))
+            return cm_fail(err, CM_ERR_NUMERIC, "dem_surface_update at step %ld: node %d has a non-finite %s",
+                           w->step, k / 3, isfinite(node_x[k]) ? "velocity" : "position");
+    memcpy(s->x, node_x, (size_t)n3 * sizeof *s->x);
+    if (node_v)
+        memcpy(s->v, node_v, (size_t)n3 * sizeof *s->v);
+    else
+        memset(s->v, 0, (size_t)n3 * sizeof *s->v);
+    double t0 = cm_now();
+    dem_surface_refit(s);
+    w->prof.exchange += cm_now() - t0;
+    return CM_OK;
+}
+
+void dem_surface_set_frame(dem_world *w, const double ref_point[3], const double travel_dir[3])
+{
+    if (!w->surf)
+        return;
+    memcpy(w->surf->ref, ref_point, sizeof w->surf->ref);
+    v3_store(w->surf->travel, v3_unit(v3_load(travel_dir)));
+}
+
+const double *dem_surface_node_forces(const dem_world *w) { return w->surf ? w->surf->node_f : NULL; }
+
+void dem_surface_totals(const dem_world *w, dem_surface_total *t)
+{
+    if (w->surf)
+        *t = w->surf->tot;
+    else
+        memset(t, 0, sizeof *t);
+}
+
+/* ---- time-step limits -------------------------------------------------- */
+
+/* Hertz contact time t_c = 2.943 delta_max / v, delta_max = (15 m* v² / (16 E* sqrt(R*)))^(2/5). */
+static double hertz_time(double E, double R, double m, double v)
+{
+    double dmax = pow(15.0 * m * v * v / (16.0 * E * sqrt(R)), 0.4);
+    return 2.943 * dmax / v;
+}
+
+/* Explicit stability of the dashpot: c dt / m* <= 1 with c = gamma_n sqrt(S_n m*)
+ * at the largest overlap (bites only for very low restitution, e < ~0.05). */
+static double damping_limit(const dem_pair_coef *c, double R, double m, double v)
+{
+    if (c->gamma_n <= 0.0)
+        return INFINITY;
+    double dmax = pow(15.0 * m * v * v / (16.0 * c->E * sqrt(R)), 0.4);
+    double sn = 2.0 * c->E * sqrt(R * dmax);
+    return 1.0 / (c->gamma_n * sqrt(sn / m));
+}
+
+static void time_limits(const dem_world *w, double *t_rayleigh, double *t_hertz, double *t_damp)
+{
+    const dem_grains *g = &w->g;
+    double tr = INFINITY, th = INFINITY, td = INFINITY;
+    double rmin[DEM_MAX_MATERIALS];
+    for (int k = 0; k < DEM_MAX_MATERIALS; k++)
+        rmin[k] = INFINITY;
+    for (int i = 0; i < g->n; i++)
+        if (g->r[i] < rmin[g->mat[i]])
+            rmin[g->mat[i]] = g->r[i];
+    double v = w->def.impact_velocity > 0.0 ? w->def.impact_velocity : 1.0;
+    for (int k = 0; k < w->n_mat; k++) {
+        if (!isfinite(rmin[k]))
+            continue;
+        const dem_material *m = &w->mat[k];
+        double G = m->young / (2.0 * (1.0 + m->poisson));
+        /* Rayleigh time (Li et al. 2005): pi r sqrt(rho/G) / (0.1631 nu + 0.8766) */
+        double t = M_PI * rmin[k] * sqrt(m->density / G) / (0.1631 * m->poisson + 0.8766);
+        tr = fmin(tr, t);
+        double mass = m->density * (4.0 / 3.0) * M_PI * pow(rmin[k], 3);
+        for (int j = 0; j < w->n_mat; j++)
+            if (isfinite(rmin[j])) { /* smallest grain of k against smallest of j */
+                const dem_material *mj = &w->mat[j];
+                double mj_mass = mj->density * (4.0 / 3.0) * M_PI * pow(rmin[j], 3);
+                double R = rmin[k] * rmin[j] / (rmin[k] + rmin[j]), ms = mass * mj_mass / (mass + mj_mass);
+                th = fmin(th, hertz_time(w->coef[k][j].E, R, ms, v));
+                td = fmin(td, damping_limit(&w->coef[k][j], R, ms, v));
+            }
+        for (int wl = 0; wl < w->n_walls; wl++) {
+            const dem_pair_coef *c = &w->coef[k][w->walls[wl].material];
+            th = fmin(th, hertz_time(c->E, rmin[k], mass, v));
+            td = fmin(td, damping_limit(c, rmin[k], mass, v));
+        }
+        if (w->surf) {
+            const dem_pair_coef *c = &w->coef[k][w->surf->material];
+            th = fmin(th, hertz_time(c->E, rmin[k], mass, v));
+            td = fmin(td, damping_limit(c, rmin[k], mass, v));
+        }
+    }
+    *t_rayleigh = tr;
+    *t_hertz = th;
+    *t_damp = td;
+}
+
+void dem_time_limits(const dem_world *w, double *t_rayleigh, double *t_hertz)
+{
+    double td;
+    time_limits(w, t_rayleigh, t_hertz, &td);
+}
+
+static int check_dt(dem_world *w, cm_error *err)
+{
+    double tr, th, td;
+    time_limits(w, &tr, &th, &td);
+    double lim_r = w->def.dt_safety_rayleigh * tr, lim_h = w->def.dt_safety_hertz * th;
+    double lim = fmin(fmin(lim_r, lim_h), td);
+    if (w->def.dt <= lim || !isfinite(lim))
+        return CM_OK;
+    const char *which = lim == td ? "dashpot" : (lim_r < lim_h ? "Rayleigh" : "Hertz");
+    char what[512];
+    snprintf(what, sizeof what,
+             "dt = %g s exceeds the stable limit %g s (%s: Rayleigh time %g s x %g, Hertz contact time %g s at "
+             "%g m/s x %g, dashpot limit %g s)",
+             w->def.dt, lim, which, tr, w->def.dt_safety_rayleigh, th, w->def.impact_velocity, w->def.dt_safety_hertz,
+             td);
+    if (w->def.allow_unstable) {
+        cm_log_warn("%s; running anyway (allow_unstable_dt)", what);
+        return CM_OK;
+    }
+    return cm_fail(err, CM_ERR_RANGE, "%s; lower dem.dt or set dem.allow_unstable_dt = true", what);
+}
+
+/* ---- neighbour list ---------------------------------------------------- */
+
+static int grow_pairs(dem_world *w, int need)
+{
+    if (need <= w->pair_cap)
+        return CM_OK;
+    int cap = w->pair_cap ? w->pair_cap : 1024;
+    while (cap < need)
+        cap *= 2;
+    int *a = realloc(w->pi, (size_t)cap * sizeof *a);
+    if (!a)
+        return CM_ERR_NOMEM;
+    w->pi = a;
+    a = realloc(w->pj, (size_t)cap * sizeof *a);
+    if (!a)
+        return CM_ERR_NOMEM;
+    w->pj = a;
+    for (int k = 0; k < 2; k++) {
+        double *h = realloc(w->hist_val[k], (size_t)cap * 3 * sizeof *h);
+        if (!h)
+            return CM_ERR_NOMEM;
+        w->hist_val[k] = h;
+    }
+    w->pair_cap = cap;
+    return CM_OK;
+}
+
+typedef struct grid_dims {
+    double lo[3], h;
+    int n[3];
+} grid_dims;
+
+static int cell_of(const grid_dims *gd, double x, double y, double z)
+{
+    int c[3];
+    double p[3] = {x, y, z};
+    for (int k = 0; k < 3; k++) {
+        int ck = (int)floor((p[k] - gd->lo[k]) / gd->h);
+        c[k] = ck < 0 ? 0 : (ck >= gd->n[k] ? gd->n[k] - 1 : ck);
+    }
+    return (c[2] * gd->n[1] + c[1]) * gd->n[0] + c[0];
+}
+
+/* Uniform grid over the grains' bounding box, cell >= 2 r_max + skin,
+ * grains counting-sorted by cell. */
+static int grid_build(dem_world *w, grid_dims *gd)
+{
+    dem_grains *g = &w->g;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = 0; i < g->n; i++) {
+        lo[0] = fmin(lo[0], g->x[i]), hi[0] = fmax(hi[0], g->x[i]);
+        lo[1] = fmin(lo[1], g->y[i]), hi[1] = fmax(hi[1], g->y[i]);
+        lo[2] = fmin(lo[2], g->z[i]), hi[2] = fmax(hi[2], g->z[i]);
+    }
+    double h = 2.0 * w->r_max + w->skin;
+    long ncell;
+    for (;;) {
+        ncell = 1;
+        for (int k = 0; k < 3; k++) {
+            gd->n[k] = (int)fmin(1e6, floor((hi[k] - lo[k]) / h) + 1);
+            ncell *= gd->n[k];
+        }
+        if (ncell <= 4L * g->n + 64)
+            break;
+        h *= 1.5; /* a few grains far away: coarser cells rather than a huge grid */
+    }
+    memcpy(gd->lo, lo, sizeof lo);
+    gd->h = h;
+    if (ncell + 1 > w->cell_cap) { /* grows only when the grains spread out */
+        int *a = realloc(w->cell_start, (size_t)(ncell + 1) * sizeof *a);
+        if (!a)
+            return CM_ERR_NOMEM;
+        w->cell_start = a;
+        a = realloc(w->cell_pos, (size_t)(ncell + 1) * sizeof *a);
+        if (!a)
+            return CM_ERR_NOMEM;
+        w->cell_pos = a;
+        w->cell_cap = (int)(ncell + 1);
+    }
+    if (!w->cell_items) { /* once */
+        w->cell_items = malloc((size_t)g->cap * sizeof *w->cell_items);
+        if (!w->cell_items)
+            return CM_ERR_NOMEM;
+    }
+    memset(w->cell_start, 0, (size_t)(ncell + 1) * sizeof *w->cell_start);
+    for (int i = 0; i < g->n; i++) {
+        w->grain_cell[i] = cell_of(gd, g->x[i], g->y[i], g->z[i]);
+        w->cell_start[w->grain_cell[i] + 1]++;
+    }
+    for (long c = 0; c < ncell; c++)
+        w->cell_start[c + 1] += w->cell_start[c];
+    int *pos = w->cell_pos; /* stable counting sort */
+    memcpy(pos, w->cell_start, (size_t)(ncell + 1) * sizeof *pos);
+    for (int i = 0; i < g->n; i++)
+        w->cell_items[pos[w->grain_cell[i]]++] = i;
+    return CM_OK;
+}
+
+static int neighbour_rebuild(dem_world *w, cm_error *err)
+{
+    dem_grains *g = &w->g;
+    grid_dims gd;
+    if (grid_build(w, &gd))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
+    if (w->def.reorder_every > 0 && w->rebuild_count % w->def.reorder_every == 0 && g->n > 1) {
+        /* re-sort grains by cell (cell_items is that order) for memory locality */
+        dem_grains_permute(w, w->cell_items);
+        if (grid_build(w, &gd))
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
+    }
+    w->n_pairs = 0;
+    for (int i = 0; i < g->n; i++) {
+        int c = w->grain_cell[i];
+        int cx = c % gd.n[0], cy = (c / gd.n[0]) % gd.n[1], cz = c / (gd.n[0] * gd.n[1]);
+        double ri = g->r[i] + w->skin;
+        for (int dz = -1; dz <= 1; dz++) {
+            int z = cz + dz;
+            if (z < 0 || z >= gd.n[2])
+                continue;
+            for (int dy = -1; dy <= 1; dy++) {
+                int y = cy + dy;
+                if (y < 0 || y >= gd.n[1])
+                    continue;
+                for (int dx = -1; dx <= 1; dx++) {
+                    int x = cx + dx;
+                    if (x < 0 || x >= gd.n[0])
+                        continue;
+                    int cc = (z * gd.n[1] + y) * gd.n[0] + x;
+                    for (int k = w->cell_start[cc]; k < w->cell_start[cc + 1]; k++) {
+                        int j = w->cell_items[k];
+                        if (j <= i)
+                            continue;
+                        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+                        double cut = ri + g->r[j];
+                        if (ex * ex + ey * ey + ez * ez >= cut * cut)
+                            continue;
+                        if (w->n_pairs == w->pair_cap && grow_pairs(w, w->n_pairs + 1))
+                            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step,
+                                           w->n_pairs + 1);
+                        w->pi[w->n_pairs] = i;
+                        w->pj[w->n_pairs] = j;
+                        w->n_pairs++;
+                    }
+                }
+            }
+        }
+    }
+    /* history: every candidate pair is entered in the other table, its
+     * spring carried over from the previous list when the pair was known */
+    dem_hash *old = &w->hist[w->hist_cur], *nw = &w->hist[1 - w->hist_cur];
+    const double *oval = w->hist_val[w->hist_cur];
+    double *nval = w->hist_val[1 - w->hist_cur];
+    if (dem_hash_reset(nw, w->n_pairs))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
+    for (int p = 0; p < w->n_pairs; p++) {
+        uint64_t key = dem_pair_key(g->id[w->pi[p]], g->id[w->pj[p]]);
+        nw->row[dem_hash_insert(nw, key)] = p;
+        int o = dem_hash_find(old, key);
+        if (o >= 0)
+            memcpy(nval + 3 * (size_t)p, oval + 3 * (size_t)old->row[o], 3 * sizeof(double));
+        else
+            nval[3 * p] = nval[3 * p + 1] = nval[3 * p + 2] = 0.0;
+    }
+    w->hist_cur = 1 - w->hist_cur;
+    memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));
+    memcpy(g->y0, g->y, (size_t)g->n * sizeof(double));
+    memcpy(g->z0, g->z, (size_t)g->n * sizeof(double));
+    w->rebuild_count++;
+    w->prof.rebuilds++;
+    w->need_rebuild = 0;
+    return CM_OK;
+}
+
+int dem_world_prepare(dem_world *w, cm_error *err)
+{
+    dem_grains *g = &w->g;
+    w->r_min = INFINITY;
+    w->r_max = 0.0;
+    for (int i = 0; i < g->n; i++) {
+        w->r_min = fmin(w->r_min, g->r[i]);
+        w->r_max = fmax(w->r_max, g->r[i]);
+    }
+    if (g->n == 0)
+        w->r_min = w->r_max = 1.0;
+    w->skin = w->def.skin > 0.0 ? w->def.skin : 0.3 * w->r_min;
+    if (w->wall_stride != w->n_walls) { /* walls added: new layout, springs restart */
+        w->wall_stride = w->n_walls;
+        memset(g->wall_hist, 0, (size_t)g->cap * DEM_MAX_WALLS * 3 * sizeof(double));
+        memset(g->wall_mask, 0, (size_t)g->cap * sizeof *g->wall_mask);
+    }
+    int rc = check_dt(w, err);
+    if (rc)
+        return rc;
+    w->need_rebuild = 1;
+    w->prepared = 1;
+    return CM_OK;
+}
+
+/* ---- the step ---------------------------------------------------------- */
+
+static inline int thread_id(void)
+{
+#ifdef _OPENMP
+    return omp_get_thread_num();
+#else
+    return 0;
+#endif
+}
+
+int dem_step_surface(dem_world *w, cm_error *err)
+{
+    if (!w->prepared) {
+        int rc = dem_world_prepare(w, err);
+        if (rc)
+            return rc;
+    }
+    double t0 = cm_now();
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, nw = w->n_walls;
+    const double dt = w->def.dt;
+    const vec3 grav = v3_load(w->def.gravity);
+    int contacts = 0;
+    for (int t = 0; t < nt; t++)
+        memset(w->tb[t].wall_f, 0, sizeof w->tb[t].wall_f);
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+        int tid = thread_id();
+        int lo = (int)((long)n * tid / nt), hi = (int)((long)n * (tid + 1) / nt);
+        double(*wf)[3] = w->tb[tid].wall_f;
+        for (int i = lo; i < hi; i++) {
+            double m = 1.0 / g->inv_m[i];
+            /* gravity, eq. 1 */
+            g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
+            g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
+            double r = g->r[i];
+            uint32_t mask = g->wall_mask[i];
+            for (int k = 0; k < nw; k++) {
+                const dem_wall *wl = &w->walls[k];
+                vec3 nrm = v3_load(wl->n);
+                double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
+                double delta = r - dist;
+                double *xi = g->wall_hist + ((size_t)i * nw + k) * 3;
+                if (delta <= 0.0) {
+                    if (mask & (1u << k)) {
+                        xi[0] = xi[1] = xi[2] = 0.0;
+                        mask &= ~(1u << k);
+                    }
+                    continue;
+                }
+                mask |= 1u << k;
+                contacts++;
+                vec3 lever = v3_scale(nrm, -dist); /* centre -> contact point on the plane */
+                vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]);
+                vec3 vrel = v3_add(v3(g->vx[i], g->vy[i], g->vz[i]), v3_cross(wi, lever));
+                const dem_pair_coef *cf = &w->coef[g->mat[i]][wl->material];
+                double fn;
+                /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
+                vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
+                vec3 T = v3_add(v3_cross(lever, F), dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+                g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
+                g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
+                wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
+            }
+            g->wall_mask[i] = mask;
+        }
+    }
+    for (int k = 0; k < nw; k++) {
+        memset(w->walls[k].force, 0, sizeof w->walls[k].force);
+        for (int t = 0; t < nt; t++)
+            for (int c = 0; c < 3; c++)
+                w->walls[k].force[c] += w->tb[t].wall_f[k][c];
+    }
+    w->contacts_gw = contacts;
+    int rc = CM_OK;
+    if (w->surf)
+        rc = dem_surface_contacts(w, err);
+    w->prof.exchange += cm_now() - t0;
+    return rc;
+}
+
+/* Grain–grain contact of pair p (slots i < j); force and torques written to
+ * the arrays f (6 blocks of cap: fx fy fz tx ty tz). Returns 1 in contact. */
+static inline int pair_contact(dem_world *w, int p, double *fx, double *fy, double *fz, double *tx, double *ty,
+                               double *tz)
+{
+    dem_grains *g = &w->g;
+    int i = w->pi[p], j = w->pj[p];
+    double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+    double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+    double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
+    if (d2 >= rs * rs || d2 == 0.0) { /* coincident centres: no normal, skip */
+        if (xi[0] != 0.0 || xi[1] != 0.0 || xi[2] != 0.0)
+            xi[0] = xi[1] = xi[2] = 0.0;
+        return 0;
+    }
+    double d = sqrt(d2);
+    double delta = rs - d; /* eq. 18 */
+    vec3 n = v3(ex / d, ey / d, ez / d); /* eq. 10: from j to i */
+    /* levers to the contact point, the middle of the overlap (the paper's
+     * eq. 11 is garbled; this is the usual choice) */
+    double li = g->r[i] - 0.5 * delta, lj = g->r[j] - 0.5 * delta;
+    vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]), wj = v3(g->wx[j], g->wy[j], g->wz[j]);
+    /* eq. 12: v_i + w_i x d_i - (v_j + w_j x d_j), d_i = -li n, d_j = +lj n */
+    vec3 vrel = v3_sub(v3(g->vx[i] - g->vx[j], g->vy[i] - g->vy[j], g->vz[i] - g->vz[j]),
+                       v3_cross(v3_add(v3_scale(wi, li), v3_scale(wj, lj)), n));
+    double R = g->r[i] * g->r[j] / rs;                        /* eq. 16 */
+    double m = 1.0 / (g->inv_m[i] + g->inv_m[j]);             /* eq. 17 */
+    const dem_pair_coef *cf = &w->coef[g->mat[i]][g->mat[j]];
+    double fn;
+    vec3 F = dem_hm_force(cf, n, delta, R, m, vrel, w->def.dt, xi, &fn);
+    /* torques (eq. 7): d_i x F on i, d_j x (-F) on j; both are -l (n x F) */
+    vec3 nxf = v3_cross(n, F);
+    vec3 Ti = v3_scale(nxf, -li), Tj = v3_scale(nxf, -lj);
+    if (cf->mu_roll > 0.0) {
+        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), w->def.dt);
+        Ti = v3_add(Ti, tr);
+        Tj = v3_sub(Tj, tr);
+    }
+    fx[i] += F.x, fy[i] += F.y, fz[i] += F.z;
+    fx[j] -= F.x, fy[j] -= F.y, fz[j] -= F.z;
+    tx[i] += Ti.x, ty[i] += Ti.y, tz[i] += Ti.z;
+    tx[j] += Tj.x, ty[j] += Tj.y, tz[j] += Tj.z;
+    return 1;
+}
+
+int dem_step_grains(dem_world *w, cm_error *err)
+{
+    if (!w->prepared)
+        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, cap = g->cap;
+    const double dt = w->def.dt;
+    if (w->need_rebuild) {
+        double t0 = cm_now();
+        int rc = neighbour_rebuild(w, err);
+        w->prof.broad += cm_now() - t0;
+        if (rc)
+            return rc;
+    }
+    /* narrow phase: pairs split in nt contiguous blocks; thread t > 0
+     * accumulates into its own buffer, merged below in thread order, so the
+     * sums are the same for a given thread count */
+    double t0 = cm_now();
+    int contacts = 0;
+    const int np = w->n_pairs;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+        int tid = thread_id();
+        int lo = (int)((long)np * tid / nt), hi = (int)((long)np * (tid + 1) / nt);
+        double *fx, *fy, *fz, *tx, *ty, *tz;
+        if (tid == 0) {
+            fx = g->fx, fy = g->fy, fz = g->fz, tx = g->tx, ty = g->ty, tz = g->tz;
+        } else {
+            double *b = w->tb[tid].f;
+            memset(b, 0, 6 * (size_t)cap * sizeof *b);
+            fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
+        }
+        for (int p = lo; p < hi; p++)
+            contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
+#ifdef _OPENMP
+#pragma omp barrier
+#pragma omp for schedule(static)
+#endif
+        for (int i = 0; i < n; i++)
+            for (int t = 1; t < nt; t++) {
+                const double *b = w->tb[t].f;
+                g->fx[i] += b[i], g->fy[i] += b[cap + i], g->fz[i] += b[2 * cap + i];
+                g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
+            }
+    }
+    w->contacts_gg = contacts;
+    double t1 = cm_now();
+    w->prof.narrow += t1 - t0;
+
+    /* Verlet, eqs. 4–5 as predictor/corrector: v(t) = v(t-dt/2) + a(t) dt/2
+     * completes the previous step, v(t+dt/2) = v(t) + a(t) dt/2 predicts, and
+     * x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt + a dt²/2 (eq. 4). Spheres:
+     * ω integrated directly (no gyroscopic term), orientation as a unit
+     * quaternion rotated by ω dt (no Euler-angle singularity, eq. 9 avoided). */
+    double maxd2 = 0.0;
+    int bad = n;
+    const double half = 0.5 * w->skin;
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : maxd2) reduction(min : bad)
+#endif
+    for (int i = 0; i < n; i++) {
+        double im = g->inv_m[i], ii = g->inv_i[i];
+        g->vx[i] += g->fx[i] * im * dt;
+        g->vy[i] += g->fy[i] * im * dt;
+        g->vz[i] += g->fz[i] * im * dt;
+        g->wx[i] += g->tx[i] * ii * dt;
+        g->wy[i] += g->ty[i] * ii * dt;
+        g->wz[i] += g->tz[i] * ii * dt;
+        g->x[i] += g->vx[i] * dt;
+        g->y[i] += g->vy[i] * dt;
+        g->z[i] += g->vz[i] * dt;
+        /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
+         * the orientation does not feed back into the forces of spheres */
+        double *q = g->q + 4 * i;
+        double hx = 0.5 * dt * g->wx[i], hy = 0.5 * dt * g->wy[i], hz = 0.5 * dt * g->wz[i];
+        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
+        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
+        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
+        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
+        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+        q[0] = qw * qn, q[1] = qx * qn, q[2] = qy * qn, q[3] = qz * qn;
+        double ex = g->x[i] - g->x0[i], ey = g->y[i] - g->y0[i], ez = g->z[i] - g->z0[i];
+        double d2 = ex * ex + ey * ey + ez * ez;
+        if (d2 > maxd2)
+            maxd2 = d2;
+        if (!isfinite(d2) && i < bad)
+            bad = i;
+    }
+    w->step++;
+    w->time += dt;
+    double t2 = cm_now();
+    w->prof.integrate += t2 - t1;
+    if (bad < n)
+        return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position (dt too large?)",
+                       w->step, w->time, g->id[bad]);
+    if (maxd2 > half * half) {
+        int rc = neighbour_rebuild(w, err);
+        w->prof.broad += cm_now() - t2;
+        if (rc)
+            return rc;
+    }
+    return CM_OK;
+}
+
+int dem_step(dem_world *w, cm_error *err)
+{
+    int rc = dem_step_surface(w, err);
+    return rc ? rc : dem_step_grains(w, err);
+}
+
+/* ---- diagnostics ------------------------------------------------------- */
+
+void dem_world_stats(const dem_world *w, dem_stats *s)
+{
+    const dem_grains *g = &w->g;
+    memset(s, 0, sizeof *s);
+    s->time = w->time;
+    s->step = w->step;
+    s->grains = g->n;
+    vec3 grav = v3_load(w->def.gravity);
+    for (int i = 0; i < g->n; i++) {
+        double m = 1.0 / g->inv_m[i], I = 1.0 / g->inv_i[i];
+        s->ke_trans += 0.5 * m * (g->vx[i] * g->vx[i] + g->vy[i] * g->vy[i] + g->vz[i] * g->vz[i]);
+        s->ke_rot += 0.5 * I * (g->wx[i] * g->wx[i] + g->wy[i] * g->wy[i] + g->wz[i] * g->wz[i]);
+        s->pe_grav -= m * (grav.x * g->x[i] + grav.y * g->y[i] + grav.z * g->z[i]);
+        for (int k = 0; k < w->n_walls; k++) {
+            const dem_wall *wl = &w->walls[k];
+            double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] + (g->z[i] - wl->p[2]) * wl->n[2];
+            double delta = g->r[i] - dist;
+            if (delta > 0.0) {
+                s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][wl->material], g->r[i], delta);
+                s->max_overlap = fmax(s->max_overlap, delta / g->r[i]);
+            }
+        }
+    }
+    for (int p = 0; p < w->n_pairs; p++) {
+        int i = w->pi[p], j = w->pj[p];
+        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+        double d = sqrt(ex * ex + ey * ey + ez * ez), delta = g->r[i] + g->r[j] - d;
+        if (delta > 0.0) {
+            double R = g->r[i] * g->r[j] / (g->r[i] + g->r[j]);
+            s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][g->mat[j]], R, delta);
+            s->max_overlap = fmax(s->max_overlap, delta / fmin(g->r[i], g->r[j]));
+        }
+    }
+    s->contacts_gg = w->contacts_gg;
+    s->contacts_gw = w->contacts_gw;
+    s->contacts_gs = w->surf ? w->surf->tot.contacts : 0;
+    s->profile = w->prof;
+}
+
+void dem_grain_contact_counts(const dem_world *w, int *out)
+{
+    const dem_grains *g = &w->g;
+    for (int i = 0; i < g->n; i++) {
+        int c = g->surf_count[i];
+        for (int k = 0; k < w->n_walls; k++) {
+            const dem_wall *wl = &w->walls[k];
+            double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] + (g->z[i] - wl->p[2]) * wl->n[2];
+            c += dist < g->r[i];
+        }
+        out[g->id[i]] = c;
+    }
+    for (int p = 0; p < w->n_pairs; p++) {
+        int i = w->pi[p], j = w->pj[p];
+        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+        double rs = g->r[i] + g->r[j];
+        if (ex * ex + ey * ey + ez * ez < rs * rs) {
+            out[g->id[i]]++;
+            out[g->id[j]]++;
+        }
+    }
+}
+
+uint64_t dem_world_hash(const dem_world *w)
+{
+    const dem_grains *g = &w->g;
+    uint64_t h = 1469598103934665603ULL;
+    for (int id = 0; id < g->n; id++) {
+        int i = g->slot_of[id];
+        double v[9] = {g->x[i], g->y[i], g->z[i], g->vx[i], g->vy[i], g->vz[i], g->wx[i], g->wy[i], g->wz[i]};
+        const unsigned char *b = (const unsigned char *)v;
+        for (size_t k = 0; k < sizeof v; k++) {
+            h ^= b[k];
+            h *= 1099511628211ULL;
+        }
+    }
+    return h;
+}

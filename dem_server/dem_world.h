@@ -1,0 +1,97 @@
+/* Private layout of dem_world (tests reach it through the private include
+ * path; nothing outside dem_server/ should). */
+#ifndef DEM_WORLD_H
+#define DEM_WORLD_H
+
+#include <stdint.h>
+
+#include "dem.h"
+#include "dem_contact.h"
+#include "dem_hash.h"
+#include "dem_surface.h"
+
+_Static_assert(DEM_MAX_WALLS <= 32, "dem_grains.wall_mask holds one bit per wall");
+
+typedef struct dem_wall {
+    double p[3], n[3]; /* point, unit normal (into the domain) */
+    int material;
+    double force[3];   /* force the grains exert on it in the last step, N */
+} dem_wall;
+
+/* Hot grain data in structure-of-arrays; index = current slot (grains are
+ * re-sorted by grid cell now and then), id = stable name. */
+typedef struct dem_grains {
+    int n, cap;
+    double *x, *y, *z;
+    double *vx, *vy, *vz;
+    double *wx, *wy, *wz;
+    double *fx, *fy, *fz;
+    double *tx, *ty, *tz;
+    double *r, *inv_m, *inv_i;
+    int *mat;
+    /* cold */
+    double *q;         /* 4 per grain (w, x, y, z) */
+    int *id;           /* id of the grain in slot i */
+    int *slot_of;      /* slot of grain id */
+    double *x0, *y0, *z0; /* positions at the last neighbour rebuild */
+    double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
+    uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
+    int *surf_count;   /* surface contacts of the grain in the last step */
+} dem_grains;
+
+/* Per-thread force buffers (thread 0 writes the grain arrays directly). */
+typedef struct dem_thread_buf {
+    double *f; /* 6 * cap: fx fy fz tx ty tz blocks */
+    double wall_f[DEM_MAX_WALLS][3];
+    int contacts;
+    double pad[8];
+} dem_thread_buf;
+
+struct dem_world {
+    dem_world_def def;
+    int n_mat;
+    dem_material mat[DEM_MAX_MATERIALS];
+    dem_pair_coef coef[DEM_MAX_MATERIALS][DEM_MAX_MATERIALS];
+    dem_grains g;
+    int n_walls;
+    dem_wall walls[DEM_MAX_WALLS];
+    int wall_stride; /* walls per grain in wall_hist (n_walls at the last prepare) */
+
+    /* neighbour list: candidate pairs (slots i < j) within r_i + r_j + skin,
+     * each owning a slot of the history hash for the list's lifetime */
+    int n_pairs, pair_cap;
+    int *pi, *pj;
+    dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
+    double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
+    int hist_cur;
+    double skin;
+    int need_rebuild;
+    /* cell grid */
+    int *cell_start, *cell_items, cell_cap;
+    int *grain_cell;
+    long rebuild_count;
+
+    dem_surface *surf;
+
+    int n_threads;
+    dem_thread_buf *tb; /* n_threads entries */
+    double *scratch;    /* DEM_SCRATCH_PER_GRAIN * cap: re-sorting without allocation */
+    int *cell_pos;      /* cell_cap: counting-sort cursor */
+
+    long step;
+    double time;
+    int prepared;
+    int contacts_gg, contacts_gw;
+    double r_min, r_max;
+    dem_profile prof;
+};
+
+/* doubles of scratch per grain: the larger of the wall and surface history */
+#define DEM_SCRATCH_PER_GRAIN                                                                         \
+    (DEM_MAX_WALLS * 3 > DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE ? DEM_MAX_WALLS * 3                      \
+                                                             : DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE)
+
+int dem_world_prepare(dem_world *w, cm_error *err);
+void dem_grains_permute(dem_world *w, const int *order);
+
+#endif

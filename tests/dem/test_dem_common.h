@@ -1,0 +1,81 @@
+/* Helpers shared by the DEM tests. */
+#ifndef TEST_DEM_COMMON_H
+#define TEST_DEM_COMMON_H
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "dem.h"
+#include "test.h"
+
+static inline dem_material test_material(double E, double nu, double e, double mu)
+{
+    dem_material m = {.density = 2600.0, .young = E, .poisson = nu, .restitution = e, .friction = mu};
+    return m;
+}
+
+/* World with one material, no gravity unless given. */
+static inline dem_world *test_world(const dem_material *m, int n_mat, double dt, int max_grains, const double g[3],
+                                    int threads)
+{
+    dem_world_def d = dem_world_def_default();
+    d.dt = dt;
+    d.max_grains = max_grains;
+    d.threads = threads;
+    d.gravity[0] = g ? g[0] : 0.0;
+    d.gravity[1] = g ? g[1] : 0.0;
+    d.gravity[2] = g ? g[2] : 0.0;
+    dem_world *w = NULL;
+    cm_error err = {0};
+    if (dem_world_create(&d, n_mat, m, &w, &err)) {
+        fprintf(stderr, "dem_world_create: %s\n", err.msg);
+        return NULL;
+    }
+    return w;
+}
+
+/* Hertz closed form for a normal impact at relative speed v. */
+typedef struct hertz_ref {
+    double dmax, tc, fmax;
+} hertz_ref;
+
+static inline hertz_ref hertz_closed_form(double Es, double Rs, double ms, double v)
+{
+    hertz_ref h;
+    h.dmax = pow(15.0 * ms * v * v / (16.0 * Es * sqrt(Rs)), 0.4);
+    h.tc = 2.943 * h.dmax / v;
+    h.fmax = 4.0 / 3.0 * Es * sqrt(Rs) * pow(h.dmax, 1.5);
+    return h;
+}
+
+static inline double e_star_same(const dem_material *m)
+{
+    return m->young / (2.0 * (1.0 - m->poisson * m->poisson));
+}
+
+/* Plane z = z0 over [x0, x0 + nx s] x [y0, y0 + ny s] as 2 nx ny triangles,
+ * diagonals alternating. x: (nx+1)(ny+1)*3, tris: 2 nx ny * 3. */
+static inline void test_plane_mesh(int nx, int ny, double s, double x0, double y0, double z0, double *x, int *tris)
+{
+    for (int j = 0; j <= ny; j++)
+        for (int i = 0; i <= nx; i++) {
+            double *p = x + 3 * (j * (nx + 1) + i);
+            p[0] = x0 + i * s, p[1] = y0 + j * s, p[2] = z0;
+        }
+    int t = 0;
+    for (int j = 0; j < ny; j++)
+        for (int i = 0; i < nx; i++) {
+            int a = j * (nx + 1) + i, b = a + 1, c = a + nx + 1, d = c + 1;
+            if ((i + j) % 2) {
+                int tt[6] = {a, b, d, a, d, c};
+                memcpy(tris + 6 * t, tt, sizeof tt);
+            } else {
+                int tt[6] = {a, b, c, b, d, c};
+                memcpy(tris + 6 * t, tt, sizeof tt);
+            }
+            t++;
+        }
+}
+
+#endif

@@ -14,6 +14,8 @@ typedef struct cm_run_config {
     int exchange_every;    /* coupling.exchange_every: DEM steps per exchange (default 1) */
     double stall_timeout;  /* coupling.stall_timeout, s: peer silent this long counts as dead (default 1) */
     double connect_timeout;/* coupling.connect_timeout, s: wait this long for the peer to start (default 120) */
+    double max_overlap;    /* coupling.max_overlap: stop when a grain overlap exceeds this fraction of its
+                              radius (default 0.2; 0 = never) */
 } cm_run_config;
 
 int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err);

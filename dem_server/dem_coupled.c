@@ -47,6 +47,26 @@ static int move_surface(coupled *c, double tau, cm_error *err)
     return dem_surface_update(c->w, c->x_sub, c->v, err);
 }
 
+/* Run-time guard: stop with the cause and the setting to change rather than
+ * write garbage. Grain overlaps beyond max_overlap of the radius mean the
+ * contacts are too soft for the load or the step too long; non-finite
+ * energies mean the integration has already failed. */
+static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
+{
+    dem_stats s;
+    dem_world_stats(w, &s);
+    if (!isfinite(s.ke_trans) || !isfinite(s.ke_rot))
+        return cm_fail(err, CM_ERR_NUMERIC, "grain velocities are no longer finite at t = %.4f s (step %ld): the "
+                       "integration is unstable; reduce coupling.dt", s.time, s.step);
+    if (def->max_overlap > 0 && s.max_overlap > def->max_overlap)
+        return cm_fail(err, CM_ERR_NUMERIC,
+                       "a grain overlap reached %.0f %% of the radius at t = %.4f s (step %ld; limit "
+                       "coupling.max_overlap = %.0f %%): the contacts are too soft for the load or coupling.dt is "
+                       "too long; raise the soil's young modulus or reduce coupling.dt",
+                       100 * s.max_overlap, s.time, s.step, 100 * def->max_overlap);
+    return CM_OK;
+}
+
 int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks *hooks, cm_error *err)
 {
     coupled c = {.w = w};
@@ -169,6 +189,8 @@ int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks 
         time += interval;
 
         if (hooks && hooks->after_exchange && (rc = hooks->after_exchange(w, hooks->user, n, err)))
+            goto done;
+        if (n % 100 == 0 && (rc = check_health(w, def, err)))
             goto done;
         double now = cm_now();
         if (def->progress_every > 0 && now - last_progress >= def->progress_every) {

@@ -209,6 +209,7 @@ static int run(const options *o)
                                .connect_timeout = rcfg.connect_timeout,
                                .progress_every = rcfg.progress_every,
                                .surface_material = surface_material,
+                               .max_overlap = rcfg.max_overlap,
                                .bed_height = bed_height,
                                .bed_top = bed_top,
                                .stop_flag = &g_stop};

@@ -10,6 +10,7 @@ drive_def drive_def_default(void)
     d.radius = 0.272;
     d.sink_velocity = 0.1;
     d.target_load = 5000.0;
+    d.load_window = 0.005;
     d.max_sink = 0.2;
     d.slip = 0.05;
     d.omega = 1.8;
@@ -36,6 +37,7 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
         (rc = cm_scene_double(s, "wheel.radius", 1e-3, 10.0, &d->radius, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.sink_velocity", 1e-6, 10.0, d->sink_velocity, &d->sink_velocity, err)) ||
         (rc = cm_scene_double(s, "wheel.target_load", 0.0, 1e7, &d->target_load, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.load_window", 0.0, 10.0, d->load_window, &d->load_window, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.max_sink", 1e-4, 10.0, d->max_sink, &d->max_sink, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.slip", -0.95, 0.95, d->slip, &d->slip, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.omega", 1e-6, 1e3, d->omega, &d->omega, err)) ||
@@ -79,14 +81,18 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, dou
     else if (s->phase == DRIVE_TRAVEL)
         s->travelled += s->velocity[0] * dt;
 
-    /* 2. Phase changes, from what the last interval measured. */
-    if (s->phase == DRIVE_SINK && load >= d->target_load) {
+    /* 2. Phase changes, from what the last intervals measured: the load is
+     * averaged over about load_window so that one grain's spike does not
+     * end the sinkage early. */
+    double blend = d->load_window > dt ? dt / d->load_window : 1.0;
+    s->load_avg += blend * (load - s->load_avg);
+    if (s->phase == DRIVE_SINK && s->load_avg >= d->target_load) {
         s->phase = DRIVE_TRAVEL;
         s->t_phase = time;
     } else if (s->phase == DRIVE_SINK && s->sunk > d->max_sink) {
         return cm_fail(err, CM_ERR_NUMERIC,
                        "wheel sank %.3f m (wheel.max_sink) without reaching wheel.target_load = %g N (load %g N)",
-                       s->sunk, d->target_load, load);
+                       s->sunk, d->target_load, s->load_avg);
     } else if (s->phase == DRIVE_TRAVEL && s->travelled >= d->travel_distance) {
         s->phase = DRIVE_DONE;
         s->t_phase = time;

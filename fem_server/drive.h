@@ -29,6 +29,8 @@ typedef struct drive_def {
     double radius;           /* m, rolling radius R_T used for slip (tire outer radius) */
     double sink_velocity;    /* m/s, downward speed in the sinkage phase (table 1: 0.1) */
     double target_load;      /* N, vertical contact force that ends the sinkage phase */
+    double load_window;      /* s, time constant of the moving average of the load that
+                                is compared with target_load (DEM forces are noisy) */
     double max_sink;         /* m, fail if the load is not reached after sinking this far */
     double slip;             /* (-1, 1): the prescribed slip in the travel phase */
     double omega;            /* rad/s, > 0: wheel angular speed in the travel phase */
@@ -46,6 +48,7 @@ typedef struct drive_state {
     double omega;       /* rad/s about +y, held during the next interval */
     double angle;       /* rad, accumulated rotation */
     double sunk;        /* m, distance moved down in the sinkage phase */
+    double load_avg;    /* N, exponential moving average of the vertical contact force */
     double travelled;   /* m, distance moved along x in the travel phase */
     double t_phase;     /* s, when the current phase began */
 } drive_state;

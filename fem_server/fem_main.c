@@ -271,6 +271,20 @@ static int run(const options *o)
         for (size_t j = 0; j < 3 * (size_t)nn; j++)
             w_fem += f[j] * (p[j] - x_prev[j]);
         memcpy(x_prev, p, 3 * (size_t)nn * sizeof(double));
+        /* Coupling stability guard: the work of the interface forces seen by
+         * the DEM (f . v dt, velocities it received) and by the FEM (f . dx,
+         * how it moved the nodes) agree to O(dt) while the staggered exchange
+         * is stable; an unstable exchange pumps energy into the tire and the
+         * two diverge long before anything overflows. */
+        double w_dem = info[IPC_INFO_DEM_WORK], gap = fabs(w_fem - w_dem);
+        if (gap > 1.0 && gap > 0.25 * fmax(fabs(w_fem), fabs(w_dem))) {
+            cm_fail(&err, CM_ERR_NUMERIC,
+                    "coupling unstable at t = %.4f s: the interface work seen by the FEM (%.3g J) and by the DEM "
+                    "(%.3g J) diverge. The exchange interval (coupling.dt x coupling.exchange_every = %.3g s) is "
+                    "too long for the grain contacts on the lightest surface nodes: reduce coupling.dt",
+                    time + interval, w_fem, w_dem, interval);
+            goto fail;
+        }
         out->kind = IPC_FRAME_DATA;
         out->time = time + interval;
         memcpy(&out->info[IPC_INFO_CENTER_X], ds.center, 3 * sizeof(double));

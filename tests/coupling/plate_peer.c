@@ -10,9 +10,9 @@
  * whichever program plays that role):
  *   fem = { plate_z = 0.0; plate_half_size = 0.05; };
  * and reads `run` and `coupling` like the servers. Every exchange it writes
- * t, Fx, Fy, Fz, contacts (the resultant from the nodal forces) to
- * DIR/plate.csv, and at the end prints the impulse, the contact duration and
- * the peak force. */
+ * t, Fx, Fy, Fz, contacts (the resultant of the nodal forces on the plate)
+ * to DIR/plate.csv, and at the end prints the impulse, the contact duration
+ * and the peak of the load (the downward force the grains put on the plate). */
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
@@ -124,13 +124,14 @@ int main(int argc, char **argv)
         if ((rc = ipc_send_commit(ch)) || kind == IPC_FRAME_FINISH)
             break;
         fprintf(csv, "%.9g,%.9g,%.9g,%.9g,%g\n", t, fx, fy, fz, contacts);
-        impulse += fz * interval;
-        if (fz > 0) {
+        double load = -fz; /* grains push the plate down */
+        impulse += load * interval;
+        if (load > 0) {
             if (t_first < 0)
                 t_first = t;
             t_last = t + interval;
         }
-        f_max = fz > f_max ? fz : f_max;
+        f_max = load > f_max ? load : f_max;
     }
     fclose(csv);
     if (rc) {

@@ -36,6 +36,7 @@ static int phases(void)
     d.omega = 2.0;
     d.slip = 0.2;
     d.travel_distance = 0.05;
+    d.load_window = 0.0; /* react to the load at once */
     drive_state s;
     drive_start(&d, &s);
     cm_error err = {0};
@@ -66,6 +67,29 @@ static int phases(void)
     /* Rotation and travel are in the slip ratio: x = (1 - s) omega R t. */
     ENSURE_NEAR(s.travelled, (1 - 0.2) * 0.272 * (s.angle - a0), 1e-9);
     ENSURE(s.velocity[0] == 0 && s.omega == 0);
+    return 0;
+}
+
+/* One spike above the target does not end the sinkage: the averaged load must
+ * reach it. */
+static int load_spike_ignored(void)
+{
+    drive_def d = drive_def_default();
+    d.target_load = 1000;
+    d.load_window = 0.005;
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-5;
+    for (int k = 0; k < 2000; k++) {
+        double load = k == 500 ? 50000.0 : 300.0; /* one 50 kN spike, else 300 N */
+        ENSURE(drive_update(&d, &s, k * dt, dt, load, &err) == CM_OK);
+        ENSURE_MSG(s.phase == DRIVE_SINK, "switched at step %d, average %g N", k, s.load_avg);
+    }
+    for (int k = 0; k < 2000 && s.phase == DRIVE_SINK; k++)
+        ENSURE(drive_update(&d, &s, k * dt, dt, 1200.0, &err) == CM_OK);
+    ENSURE(s.phase == DRIVE_TRAVEL);
+    ENSURE(s.load_avg >= 1000.0 && s.load_avg < 1200.0);
     return 0;
 }
 
@@ -150,6 +174,7 @@ static int steady_detection_and_coverage(void)
 static const test_case tests[] = {
     {"slip_definitions", slip_definitions},
     {"phases", phases},
+    {"load_spike_ignored", load_spike_ignored},
     {"fixed_wheel_stays", fixed_wheel_stays},
     {"sinkage_without_load_fails", sinkage_without_load_fails},
     {"steady_detection_and_coverage", steady_detection_and_coverage},

@@ -1,0 +1,216 @@
+/* Coupled runs through the launcher: real processes, a real segment.
+ *
+ * plate_*: dem_server against plate_peer (a stand-in FEM side swapped in with
+ * `run --fem`), a grain hitting the exchanged surface: Hertz closed form.
+ * tire_*: dem_server against fem_server on a small tire and bed. */
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "test.h"
+
+extern char **environ;
+
+#if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR) || !defined(PLATE_PEER_PATH)
+#error "DEMFEM_SOURCE_DIR, DEMFEM_BUILD_DIR and PLATE_PEER_PATH must be defined"
+#endif
+
+#define SCENES DEMFEM_SOURCE_DIR "/tests/coupling/scenes/"
+
+typedef struct launch {
+    pid_t pid;
+    char out[256], log[300];
+    int status;
+    double wall;
+} launch;
+
+static double now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Starts ./run SCENE --out DIR [extra...] with the build under test. */
+static int start(launch *l, const char *scene, const char *tag, const char *const *extra)
+{
+    snprintf(l->out, sizeof l->out, "/tmp/demfem-coupled-%d-%s", (int)getpid(), tag);
+    snprintf(l->log, sizeof l->log, "%s.log", l->out);
+    mkdir(l->out, 0755);
+    const char *argv[16] = {DEMFEM_SOURCE_DIR "/run", scene, "--out", l->out};
+    int n = 4;
+    for (int i = 0; extra && extra[i] && n < 15; i++)
+        argv[n++] = extra[i];
+    argv[n] = NULL;
+    setenv("DEMFEM_NO_BUILD", "1", 1);
+    setenv("DEMFEM_BUILD_DIR", DEMFEM_BUILD_DIR, 1);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, l->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    /* Its own process group, so that a test can signal the launcher alone. */
+    posix_spawnattr_t at;
+    posix_spawnattr_init(&at);
+    posix_spawnattr_setflags(&at, POSIX_SPAWN_SETPGROUP);
+    posix_spawnattr_setpgroup(&at, 0);
+    l->wall = now();
+    int rc = posix_spawn(&l->pid, argv[0], &fa, &at, (char *const *)argv, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    posix_spawnattr_destroy(&at);
+    return rc;
+}
+
+static int finish(launch *l, double timeout_s)
+{
+    double t0 = now();
+    for (;;) {
+        int st;
+        if (waitpid(l->pid, &st, WNOHANG) == l->pid) {
+            l->status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+            l->wall = now() - l->wall;
+            return 0;
+        }
+        if (now() - t0 > timeout_s) {
+            kill(-l->pid, SIGKILL);
+            waitpid(l->pid, &st, 0);
+            return -1;
+        }
+        struct timespec ts = {0, 5000000};
+        nanosleep(&ts, NULL);
+    }
+}
+
+/* The whole log, NUL-terminated, in a static buffer. */
+static const char *log_text(const launch *l)
+{
+    static char buf[1 << 16];
+    FILE *f = fopen(l->log, "r");
+    size_t n = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
+    if (f)
+        fclose(f);
+    buf[n] = '\0';
+    return buf;
+}
+
+static void dump_log(const launch *l) { fprintf(stderr, "---- %s ----\n%s----\n", l->log, log_text(l)); }
+
+/* The segment the launcher chose (its log names it) is gone from /dev/shm. */
+static int shm_clean(const launch *l)
+{
+    const char *p = strstr(log_text(l), "(shared memory /");
+    char name[128], path[160];
+    if (!p || sscanf(p, "(shared memory %127[^)])", name) != 1)
+        return 0;
+    snprintf(path, sizeof path, "/dev/shm%s", name);
+    return access(path, F_OK) != 0 && errno == ENOENT;
+}
+
+/* Hertz, sphere on a rigid plane: maximum overlap, contact time, peak force. */
+typedef struct hertz {
+    double m, estar, dmax, tc, fmax;
+} hertz;
+
+static hertz hertz_sphere_plane(double r, double rho, double E1, double nu1, double E2, double nu2, double v)
+{
+    hertz h;
+    h.m = rho * 4.0 / 3.0 * M_PI * r * r * r;
+    h.estar = 1.0 / ((1 - nu1 * nu1) / E1 + (1 - nu2 * nu2) / E2);
+    h.dmax = pow(15.0 * h.m * v * v / (16.0 * h.estar * sqrt(r)), 0.4);
+    h.tc = 2.943 * h.dmax / v; /* 2.9432 to four digits */
+    h.fmax = 4.0 / 3.0 * h.estar * sqrt(r) * pow(h.dmax, 1.5);
+    return h;
+}
+
+static int plate_run(const char *scene, const char *tag, double *impulse, double *duration, double *peak)
+{
+    launch l;
+    const char *extra[] = {"--fem", PLATE_PEER_PATH, NULL};
+    ENSURE(start(&l, scene, tag, extra) == 0);
+    ENSURE(finish(&l, 60) == 0);
+    if (l.status != 0)
+        dump_log(&l);
+    ENSURE(l.status == 0);
+    const char *p = strstr(log_text(&l), "[plate] impulse ");
+    ENSURE(p && sscanf(p, "[plate] impulse %lf N s, contact duration %lf s, peak force %lf N", impulse, duration,
+                       peak) == 3);
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+/* Elastic impact (e = 1) of a grain on the edge shared by two triangles of
+ * the exchanged plate: contact time and peak force as Hertz, impulse 2 m v. */
+static int plate_impact_elastic(void)
+{
+    double J, tc, F;
+    if (plate_run(SCENES "impact_plate.cfg", "elastic", &J, &tc, &F))
+        return 1;
+    hertz h = hertz_sphere_plane(0.005, 2600, 5e7, 0.3, 2e8, 0.25, 1.0);
+    printf("  contact %.4g s (Hertz %.4g), peak %.4g N (Hertz %.4g), impulse %.5g N s (2 m v = %.5g)\n", tc, h.tc,
+           F, h.fmax, J, 2 * h.m);
+    ENSURE_REL(tc, h.tc, 0.01);  /* exchanges every 1e-6 s: 0.2 % resolution */
+    ENSURE_REL(F, h.fmax, 0.01);
+    ENSURE_REL(J, 2.0 * h.m * 1.0, 0.005);
+    return 0;
+}
+
+/* Damped impact: the grain leaves with e v, so the plate takes (1 + e) m v. */
+static int plate_impact_damped(void)
+{
+    double J, tc, F;
+    if (plate_run(SCENES "impact_plate_damped.cfg", "damped", &J, &tc, &F))
+        return 1;
+    hertz h = hertz_sphere_plane(0.005, 2600, 5e7, 0.3, 2e8, 0.25, 1.0);
+    printf("  impulse %.5g N s ((1 + e) m v = %.5g)\n", J, 1.5 * h.m);
+    ENSURE_REL(J, 1.5 * h.m, 0.02);
+    ENSURE(F < h.fmax); /* the dashpot lowers the peak */
+    return 0;
+}
+
+/* The swapped-in FEM side dies mid-run: the launcher returns non-zero within
+ * a few seconds and nothing is left in /dev/shm. */
+static int plate_peer_killed(void)
+{
+    /* A long run of the same scene: the grain flies on after the impact. */
+    char scene[300];
+    snprintf(scene, sizeof scene, "/tmp/demfem-coupled-%d-long.cfg", (int)getpid());
+    char cmd[800];
+    snprintf(cmd, sizeof cmd, "sed 's/end_time = 0.0015;/end_time = 100.0;/' %simpact_plate.cfg > %s", SCENES,
+             scene);
+    ENSURE(system(cmd) == 0);
+    launch l;
+    const char *extra[] = {"--fem", PLATE_PEER_PATH, NULL};
+    ENSURE(start(&l, scene, "killed", extra) == 0);
+    /* Let it reach the exchange loop, then kill the FEM side. */
+    struct timespec ts = {1, 0};
+    nanosleep(&ts, NULL);
+    /* [r]: the pattern must not match the shell that runs pkill itself. */
+    ENSURE(system("pkill -KILL -f 'plate_pee[r] --scene /tmp/demfem-coupled-' ") == 0);
+    double t_kill = now();
+    ENSURE(finish(&l, 20) == 0);
+    double reaction = now() - t_kill;
+    unlink(scene);
+    if (l.status == 0)
+        dump_log(&l);
+    ENSURE(l.status != 0);
+    ENSURE_MSG(reaction < 3.0, "launcher took %.2f s to end after the FEM side died", reaction);
+    ENSURE_MSG(strstr(log_text(&l), "FEM side (plate_peer) failed"), "the launcher should name the dead peer");
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"plate_impact_elastic", plate_impact_elastic},
+    {"plate_impact_damped", plate_impact_damped},
+    {"plate_peer_killed", plate_peer_killed},
+};
+
+int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -1,6 +1,13 @@
-/* drive: the wheel's prescribed motion in the two phases of the tire test
- * (paper fig. 13): sinkage at constant velocity until the vertical contact
- * force reaches the target load, then travel at a prescribed slip.
+/* drive: the wheel's motion in the two phases of the tire test.
+ *
+ * "sink_travel" (first paper, fig. 13): sinkage at constant velocity until
+ * the vertical contact force reaches the target load, then travel at a
+ * prescribed slip at that height (position control).
+ * "load_travel" (second paper, sec. 3): the wheel's height is free; a vertical
+ * load, ramped up from zero over load_ramp so that the wheel settles gently,
+ * presses it into the bed (m z'' = F_contact - W); once the contact force
+ * carries the load, the wheel travels at the prescribed slip, still free to
+ * sink or rise under the same load.
  *
  * Frame: travel along +x, axle along +y, gravity along -z. Rolling forward
  * means angular velocity +omega about +y (the lowest point then moves at
@@ -19,10 +26,10 @@ typedef enum drive_phase { DRIVE_SINK = 0, DRIVE_TRAVEL = 1, DRIVE_DONE = 2, DRI
 
 /* wheel.motion: the test's two phases, or a wheel held still (verification
  * scenes: grains dropped on a fixed tire or block). */
-typedef enum drive_motion { DRIVE_SINK_TRAVEL = 0, DRIVE_HOLD = 1 } drive_motion;
+typedef enum drive_motion { DRIVE_SINK_TRAVEL = 0, DRIVE_HOLD = 1, DRIVE_LOAD_TRAVEL = 2 } drive_motion;
 
 typedef struct drive_def {
-    drive_motion motion;     /* "sink_travel" (default) or "fixed" */
+    drive_motion motion;     /* "sink_travel" (default), "load_travel" or "fixed" */
     double center[3];        /* m, initial wheel centre (world) */
     double start_gap;        /* m, > 0: lower the wheel to this gap above the bed
                                 surface reported by the DEM before sinking; 0 = keep centre */
@@ -35,6 +42,12 @@ typedef struct drive_def {
     double slip;             /* (-1, 1): the prescribed slip in the travel phase */
     double omega;            /* rad/s, > 0: wheel angular speed in the travel phase */
     double travel_distance;  /* m, the travel phase ends after this distance */
+    /* load_travel only: */
+    double mass;             /* kg, mass of the wheel in the vertical equation of motion */
+    double load_ramp;        /* s, the load grows linearly from 0 to target_load over this time */
+    double settle_tolerance; /* the travel starts when the averaged contact force is within
+                                this fraction of the load (after the ramp) ... */
+    double settle_speed;     /* m/s, ... and the wheel sinks slower than this */
 } drive_def;
 
 drive_def drive_def_default(void);

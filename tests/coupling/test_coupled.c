@@ -207,7 +207,96 @@ static int plate_peer_killed(void)
     return 0;
 }
 
+/* Numbers from the last row of a traction.csv. */
+static int last_row(const char *dir, const char *const *cols, double *vals, int n, int *phase_seen)
+{
+    char path[400], line[4096], header[4096];
+    snprintf(path, sizeof path, "%s/traction.csv", dir);
+    FILE *f = fopen(path, "r");
+    if (!f || !fgets(header, sizeof header, f))
+        return -1;
+    int idx[16], phase_col = -1, col = 0;
+    for (int k = 0; k < n; k++)
+        idx[k] = -1;
+    for (char *tok = strtok(header, ",\n"); tok; tok = strtok(NULL, ",\n"), col++) {
+        for (int k = 0; k < n; k++)
+            if (strcmp(tok, cols[k]) == 0)
+                idx[k] = col;
+        if (strcmp(tok, "phase") == 0)
+            phase_col = col;
+    }
+    int rows = 0;
+    while (fgets(line, sizeof line, f)) {
+        rows++;
+        col = 0;
+        for (char *tok = strtok(line, ","); tok; tok = strtok(NULL, ","), col++) {
+            for (int k = 0; k < n; k++)
+                if (col == idx[k])
+                    vals[k] = strtod(tok, NULL);
+            if (col == phase_col && phase_seen)
+                phase_seen[(int)strtod(tok, NULL) & 3] = 1;
+        }
+    }
+    fclose(f);
+    for (int k = 0; k < n; k++)
+        if (idx[k] < 0)
+            return -1;
+    return rows;
+}
+
+/* The whole pipeline on a small tire and bed: sinkage to the load, travel,
+ * summary. The nodal forces the FEM receives balance the DEM's contact totals
+ * to round-off, and both sides agree on the interface work. */
+static int tire_small_runs(void)
+{
+    launch l;
+    ENSURE(start(&l, SCENES "tire_small.cfg", "tire", NULL) == 0);
+    ENSURE(finish(&l, 300) == 0);
+    if (l.status != 0)
+        dump_log(&l);
+    ENSURE(l.status == 0);
+    const char *log = log_text(&l);
+    double df = 1, dm = 1;
+    const char *p = strstr(log, "conservation: nodal forces vs contact totals differ by at most ");
+    ENSURE(p && sscanf(p, "conservation: nodal forces vs contact totals differ by at most %lf (force) and %lf", &df,
+                       &dm) == 2);
+    ENSURE_MSG(df < 1e-12 && dm < 1e-12, "force %g, moment %g", df, dm);
+    ENSURE(strstr(log, "T_P  mean") && strstr(log, "sinkage mean"));
+    const char *cols[] = {"W_dem", "W_fem", "sinkage", "Fz"};
+    double v[4];
+    int phases[4] = {0};
+    int rows = last_row(l.out, cols, v, 4, phases);
+    ENSURE(rows > 1000);
+    ENSURE(phases[0] && phases[1]); /* sinkage and travel */
+    printf("  %d exchanges in %.1f s; interface work DEM %.4g J, FEM %.4g J; sinkage %.1f mm\n", rows, l.wall, v[0],
+           v[1], 1e3 * v[2]);
+    ENSURE(v[0] < 0);                      /* the tire works on the soil */
+    ENSURE_REL(v[1], v[0], 0.05);          /* both sides see the same work */
+    ENSURE(v[2] > 0.001 && v[2] < 0.08);   /* it did sink, not through the bed */
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+/* The same with an exchange interval far too long: the run-time guard stops
+ * it with the cause and the setting to change, and both sides exit non-zero. */
+static int tire_unstable_exchange_stopped(void)
+{
+    launch l;
+    ENSURE(start(&l, SCENES "tire_small_unstable.cfg", "unstable", NULL) == 0);
+    ENSURE(finish(&l, 300) == 0);
+    const char *log = log_text(&l);
+    if (l.status == 0 || !strstr(log, "coupling unstable"))
+        dump_log(&l);
+    ENSURE(l.status != 0);
+    ENSURE(strstr(log, "[fem] error: coupling unstable") && strstr(log, "reduce coupling.dt"));
+    ENSURE(strstr(log, "[dem] error: peer fem failed"));
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
 static const test_case tests[] = {
+    {"tire_small_runs", tire_small_runs},
+    {"tire_unstable_exchange_stopped", tire_unstable_exchange_stopped},
     {"plate_impact_elastic", plate_impact_elastic},
     {"plate_impact_damped", plate_impact_damped},
     {"plate_peer_killed", plate_peer_killed},

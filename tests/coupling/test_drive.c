@@ -93,6 +93,50 @@ static int load_spike_ignored(void)
     return 0;
 }
 
+/* load_travel on a linear "soil" (F = k z below the surface): the wheel
+ * settles at the static sinkage W/k without bouncing off, then travels at
+ * the prescribed slip at that height. */
+static int load_mode_settles_and_travels(void)
+{
+    drive_def d = drive_def_default();
+    d.motion = DRIVE_LOAD_TRAVEL;
+    d.center[2] = 0.0; /* surface at z = 0: contact force k (0 - z) */
+    d.target_load = 1000.0;
+    d.load_ramp = 0.1;
+    d.mass = 20.0;
+    d.slip = 0.1;
+    d.omega = 2.0;
+    d.travel_distance = 0.1;
+    d.load_window = 0.002;
+    const double k = 2e5, c = 2.0 * 0.3 * sqrt(k * d.mass); /* soil with 30 % damping */
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-5;
+    double t = 0, max_rise = 0, t_travel = -1, z_travel = 0;
+    for (int n = 0; n < 200000 && s.phase != DRIVE_DONE; n++) {
+        if (s.phase == DRIVE_TRAVEL && t_travel < 0)
+            t_travel = t, z_travel = s.center[2];
+        double z = s.center[2];
+        double load = z < 0 ? -k * z - c * s.velocity[2] : 0.0;
+        load = load > 0 ? load : 0.0;
+        t += dt;
+        ENSURE(drive_update(&d, &s, t, dt, load, &err) == CM_OK);
+        max_rise = s.center[2] > max_rise ? s.center[2] : max_rise;
+        if (s.phase == DRIVE_SINK)
+            ENSURE(s.omega == 0.0 && s.velocity[0] == 0.0);
+    }
+    ENSURE(s.phase == DRIVE_DONE);
+    ENSURE(t_travel >= d.load_ramp);                    /* not before the load is fully applied */
+    ENSURE_REL(-z_travel, d.target_load / k, 0.1);     /* settled near the static sinkage 5 mm */
+    ENSURE_REL(-s.center[2], d.target_load / k, 0.01);
+    ENSURE(max_rise == 0.0);                            /* never lifted off the surface */
+    ENSURE(s.travelled >= 0.1);
+    /* Travel took distance / v at v = omega R (1 - s). */
+    ENSURE_REL(s.t_phase - t_travel, d.travel_distance / (d.omega * d.radius * (1 - d.slip)), 0.001);
+    return 0;
+}
+
 static int fixed_wheel_stays(void)
 {
     drive_def d = drive_def_default();
@@ -175,6 +219,7 @@ static const test_case tests[] = {
     {"slip_definitions", slip_definitions},
     {"phases", phases},
     {"load_spike_ignored", load_spike_ignored},
+    {"load_mode_settles_and_travels", load_mode_settles_and_travels},
     {"fixed_wheel_stays", fixed_wheel_stays},
     {"sinkage_without_load_fails", sinkage_without_load_fails},
     {"steady_detection_and_coverage", steady_detection_and_coverage},

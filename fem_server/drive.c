@@ -118,6 +118,8 @@ static int drive_update_load(const drive_def *d, drive_state *s, double time, do
         s->t_phase = time;
     }
     double vz = s->velocity[2] + (load - W) / d->mass * dt;
+    if (s->phase == DRIVE_SINK && vz < -d->sink_velocity)
+        vz = -d->sink_velocity; /* the rig lowers the wheel no faster than this */
     memset(s->velocity, 0, sizeof s->velocity);
     s->omega = 0.0;
     if (s->phase == DRIVE_DONE)

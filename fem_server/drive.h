@@ -5,7 +5,8 @@
  * prescribed slip at that height (position control).
  * "load_travel" (second paper, sec. 3): the wheel's height is free; a vertical
  * load, ramped up from zero over load_ramp so that the wheel settles gently,
- * presses it into the bed (m z'' = F_contact - W); once the contact force
+ * presses it into the bed (m z'' = F_contact - W), lowered no faster than
+ * sink_velocity (a test rig sets the wheel down); once the contact force
  * carries the load, the wheel travels at the prescribed slip, still free to
  * sink or rise under the same load.
  *

@@ -93,6 +93,11 @@ int fem_config_read(cm_scene *s, fem_config *cfg, cm_error *err);
 int fem_create(const fem_config *cfg, fem_model **out, cm_error *err);
 void fem_destroy(fem_model **m);
 
+/* Writes the model's mesh as Gmsh .msh v4.1 ASCII with the physical groups
+ * rim, cavity and contact, so that a user can inspect or edit the built-in
+ * tire in Gmsh and bring it back with mesh type "gmsh". */
+int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err);
+
 /* Solves K u0 = b0 (pressure + gravity, no DEM forces) with the configured
  * solver and makes it the start state (v = 0). */
 int fem_solve_static(fem_model *m, cm_error *err);

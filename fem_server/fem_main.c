@@ -1,6 +1,7 @@
 /* fem_server: the tire side of the co-simulation.
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
+ *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
  *
  * Builds the tire model of the scene's `fem` section, solves the initial
  * static state (paper sec. 3.3), creates the exchange segment and publishes
@@ -31,7 +32,7 @@ static volatile sig_atomic_t g_stop;
 static void on_signal(int sig) { g_stop = sig; }
 
 typedef struct options {
-    const char *scene, *shm, *out;
+    const char *scene, *shm, *out, *export_mesh;
 } options;
 
 /* Columns of the time series (fem.h5:/series and traction.csv). */
@@ -131,11 +132,18 @@ static int run(const options *o)
     static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
         goto fail;
-    snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
+    snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->export_mesh ? "" : o->out);
 
     double t0 = cm_now();
     if ((rc = fem_create(&cfg, &model, &err)))
         goto fail;
+    if (o->export_mesh) {
+        if ((rc = fem_write_mesh_gmsh(model, o->export_mesh, &err)))
+            goto fail;
+        cm_log_info("mesh written to %s", o->export_mesh);
+        exit_code = 0;
+        goto cleanup;
+    }
     int n_mesh_nodes, n_tets;
     fem_mesh_size(model, &n_mesh_nodes, &n_tets);
     if ((rc = fem_solve_static(model, &err)))
@@ -385,7 +393,10 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR]\n"
-                    "  The tire side of the co-simulation; run both servers with ./run SCENE.\n");
+                    "       fem_server --scene FILE --export-mesh FILE.msh\n"
+                    "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
+                    "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
+                    "  with the physical groups rim, cavity and contact, and exits.\n");
     return 2;
 }
 
@@ -400,10 +411,12 @@ int main(int argc, char **argv)
             o.shm = argv[++i];
         else if (strcmp(argv[i], "--out") == 0 && i + 1 < argc)
             o.out = argv[++i];
+        else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
+            o.export_mesh = argv[++i];
         else
             return usage();
     }
-    if (!o.scene || !o.shm)
+    if (!o.scene || (!o.shm && !o.export_mesh))
         return usage();
     cm_log_set_tag("fem");
     struct sigaction sa;
@@ -411,7 +424,7 @@ int main(int argc, char **argv)
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
-    if (mkdir(o.out, 0755) != 0 && errno != EEXIST) {
+    if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;
     }

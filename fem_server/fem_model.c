@@ -266,6 +266,11 @@ int fem_interface_nodes(const fem_model *m, uint32_t *ids)
     return CM_OK;
 }
 
+int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err)
+{
+    return fem_mesh_write_gmsh(&m->mesh, path, err);
+}
+
 int fem_interface_masses(const fem_model *m, double *mass)
 {
     /* Lumped (row-sum) mass of each interface node, eq. 33; rim nodes are

@@ -66,11 +66,11 @@ static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
     return CM_OK;
 }
 
+/* Settling is logged, not written: the run's files hold the run only (the
+ * settled bed itself is the first frame). */
 static int settle_progress(dem_world *w, void *user)
 {
-    output_ctx *c = user;
-    if (write_outputs(w, c, &c->err))
-        return c->failed = 1;
+    (void)user;
     dem_stats s;
     dem_world_stats(w, &s);
     if (s.step % 10000 == 0)
@@ -173,6 +173,14 @@ static int run(const options *o)
     }
     if ((rc = add_listed_grains(scene, &cfg, w, &err)))
         goto fail;
+    /* The run starts here: its first frame is the initial state. */
+    if (octx.out && ((rc = dem_output_frame(octx.out, w, &err)) || (rc = dem_output_series(octx.out, w, &err))))
+        goto fail;
+    {
+        dem_stats s0;
+        dem_world_stats(w, &s0);
+        octx.last_frame = octx.last_series = s0.step;
+    }
     /* Every key is read: now a leftover is a typo. */
     cm_scene_mark_known(scene, "fem");
     cm_scene_mark_known(scene, "wheel");

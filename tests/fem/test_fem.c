@@ -9,6 +9,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include <hdf5.h>
+
 #include "fem.h"
 #include "fem_element.h"
 #include "fem_mesh.h"
@@ -1153,6 +1155,76 @@ static int output_files(void)
     return 0;
 }
 
+/* Snapshots are in the world frame (ParaView shows the tire where the grains
+ * are): positions c + R (X + u), and eps33 the vertical strain. A wheel
+ * turned by 90 degrees about the axle under inflation: the rim-frame
+ * strains swap x and z, so the written eps33 must equal the rim-frame xx. */
+static int snapshot_world_frame(void)
+{
+    char dir[] = "/tmp/fem_test_world_XXXXXX";
+    ENSURE(mkdtemp(dir) != NULL);
+    fem_config c = small_tire_config(FEM_INTEGRATOR_NEWMARK);
+    c.dt = 2e-4;
+    snprintf(c.output_dir, sizeof c.output_dir, "%s", dir);
+    fem_model *m;
+    cm_error err = {0};
+    ENSURE_MSG(fem_create(&c, &m, &err) == CM_OK, "%s", err.msg);
+    ENSURE(fem_solve_static(m, &err) == CM_OK);
+    fem_wheel w = {.center = {1.0, 2.0, 3.0}, .R = {0, 0, 1, 0, 1, 0, -1, 0, 0}}; /* 90 deg about +y */
+    ENSURE(fem_set_wheel(m, &w, &err) == CM_OK);
+    ENSURE_MSG(fem_write_snapshot(m, &err) == CM_OK, "%s", err.msg);
+    /* Expected, from the rim-frame state. */
+    int nn, ne;
+    fem_mesh_size(m, &nn, &ne);
+    const double *u = fem_displacement(m);
+    double *pos = malloc(3 * (size_t)nn * sizeof *pos), *e33 = malloc((size_t)ne * sizeof *e33);
+    ENSURE(pos && e33);
+    const fem_mesh *me = &m->mesh;
+    int k = nn / 2, e = ne / 3;
+    double r[3] = {me->x[3 * k] + u[3 * k], me->x[3 * k + 1] + u[3 * k + 1], me->x[3 * k + 2] + u[3 * k + 2]};
+    double want[3] = {1.0 + r[2], 2.0 + r[1], 3.0 - r[0]};
+    const int32_t *t = &me->tets[4 * e];
+    double g[4][3], ue[4][3], eps[6];
+    fem_tet_gradients(&me->x[3 * t[0]], &me->x[3 * t[1]], &me->x[3 * t[2]], &me->x[3 * t[3]], g);
+    for (int i = 0; i < 4; i++)
+        for (int a = 0; a < 3; a++)
+            ue[i][a] = u[3 * t[i] + a];
+    fem_tet_strain(g, ue, eps);
+    fem_destroy(&m);
+    char p[256];
+    snprintf(p, sizeof p, "%s/fem.h5", dir);
+    hid_t f = H5Fopen(p, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    hid_t g0 = H5Gopen2(f, "/steps", H5P_DEFAULT);
+    ENSURE(g0 >= 0);
+    char name[64];
+    ENSURE(H5Lget_name_by_idx(g0, ".", H5_INDEX_NAME, H5_ITER_INC, 0, name, sizeof name, H5P_DEFAULT) > 0);
+    char path[128];
+    snprintf(path, sizeof path, "/steps/%s/position", name);
+    hid_t d = H5Dopen2(f, path, H5P_DEFAULT);
+    ENSURE(d >= 0 && H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, pos) >= 0);
+    H5Dclose(d);
+    snprintf(path, sizeof path, "/steps/%s/eps33", name);
+    d = H5Dopen2(f, path, H5P_DEFAULT);
+    ENSURE(d >= 0 && H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, e33) >= 0);
+    H5Dclose(d);
+    H5Gclose(g0);
+    H5Fclose(f);
+    for (int a = 0; a < 3; a++)
+        ENSURE_NEAR(pos[3 * k + a], want[a], 1e-12);
+    ENSURE(fabs(eps[0]) > 1e-9);               /* inflation does strain it */
+    ENSURE_NEAR(e33[e], eps[0], 1e-12 + 1e-9 * fabs(eps[0])); /* world zz = rim xx after the turn */
+    free(pos);
+    free(e33);
+    const char *names[] = {"fem.h5", "fem.xmf", "fem_series.csv"};
+    for (int q = 0; q < 3; q++) {
+        snprintf(p, sizeof p, "%s/%s", dir, names[q]);
+        unlink(p);
+    }
+    rmdir(dir);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     cm_log_set_quiet(1);
@@ -1180,6 +1252,7 @@ int main(int argc, char **argv)
         {"config_from_scene", config_from_scene},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},
+        {"snapshot_world_frame", snapshot_world_frame},
     };
     return test_main(argc, argv, tests, TEST_COUNT(tests));
 }

@@ -1,0 +1,156 @@
+"""Readers for the outputs of one scene run (./run SCENE --out DIR).
+
+Layouts, from the C sources:
+
+* traction.csv (fem_server/fem_main.c, also wheel.h5:/series): one row per
+  exchange, columns t, phase (0 sinkage, 1 travel, 2 done, 3 fixed), x, z
+  (wheel centre, m), angle (rad, about +y), omega (rad/s), v (m/s), slip,
+  Fx Fy Fz (N, grains on tire), My (N m, axle torque), T_H T_R T_P (N),
+  contacts, sinkage (m), E_elastic E_kinetic (J, tire), W_dem W_fem (J).
+* fem.h5 (fem_server/fem_output.c via common/h5io.c): /mesh/connectivity
+  (n_tets x 4 int), /mesh/points0 (n_nodes x 3, undeformed, rim frame),
+  /steps/NNNNNN (attributes time, step) with position (X + u, rim frame),
+  displacement, strain and stress (n_tets x 6, XDMF Tensor6 order xx xy xz
+  yy yz zz, tensor shear components, rim frame), eps22 and eps33 (the rim-
+  frame yy and zz components). The rim frame is centred on the axle and
+  turns with the wheel: world = centre + R_y(angle) (X + u).
+* dem_grains.h5 (dem_server/dem_output.c): /frame_NNNNNN (attribute time)
+  with position, velocity, angular_velocity (n x 3), radius, contacts (n).
+
+HDF5 files are opened without file locking so that a run still writing them
+can be read (the writers flush after every snapshot).
+"""
+import os
+
+os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+
+import numpy as np  # noqa: E402
+
+PHASE_NAMES = {0: "sinkage", 1: "travel", 2: "done", 3: "fixed"}
+
+
+def read_traction(path):
+    """traction.csv as a dict of numpy arrays keyed by column name.
+    A last line cut short by a run still writing is dropped."""
+    with open(path) as f:
+        header = f.readline().strip().split(",")
+        lines = f.read().splitlines()
+    ncol = len(header)
+    if lines and len(lines[-1].split(",")) != ncol:
+        lines = lines[:-1]
+    if not lines:
+        return {h: np.zeros(0) for h in header}
+    data = np.loadtxt(lines, delimiter=",", ndmin=2)
+    return {h: data[:, k] for k, h in enumerate(header)}
+
+
+def _h5():
+    import h5py
+    return h5py
+
+
+def fem_snapshots(path):
+    """[(time, group name)] of the tire snapshots in fem.h5, by time."""
+    h5py = _h5()
+    out = []
+    with h5py.File(path, "r") as f:
+        if "steps" not in f:
+            return out
+        for name, g in f["steps"].items():
+            if "time" in g.attrs and "position" in g and "strain" in g:
+                out.append((float(g.attrs["time"]), name))
+    out.sort()
+    return out
+
+
+def read_fem_mesh(path):
+    h5py = _h5()
+    with h5py.File(path, "r") as f:
+        return np.asarray(f["/mesh/connectivity"]), np.asarray(f["/mesh/points0"])
+
+
+def read_fem_snapshot(path, name):
+    """Snapshot `name` (a key of /steps): dict of position, displacement, strain, ..."""
+    h5py = _h5()
+    with h5py.File(path, "r") as f:
+        g = f["steps"][name]
+        d = {k: np.asarray(g[k]) for k in g.keys()}
+        d["time"] = float(g.attrs["time"])
+    return d
+
+
+def grain_frames(path):
+    """[(time, group name)] of the grain frames of the run in dem_grains.h5.
+
+    Frames are taken in the order written (frame number). When dem_server
+    settles a new bed in the same run it writes frames of the settling first
+    and then sets the clock back to zero: only the frames after the last
+    time the clock went back are kept. (Settling frames that are followed by
+    run frames with later times cannot be told apart from the file alone.)"""
+    h5py = _h5()
+    out = []
+    with h5py.File(path, "r") as f:
+        for name, g in f.items():
+            if name.startswith("frame_") and "time" in g.attrs and "position" in g and "velocity" in g:
+                try:
+                    num = int(name[len("frame_"):])
+                except ValueError:
+                    continue
+                out.append((num, float(g.attrs["time"]), name))
+    out.sort()
+    first = 0
+    for k in range(1, len(out)):
+        if out[k][1] < out[k - 1][1]:
+            first = k
+    return [(t, name) for _num, t, name in out[first:]]
+
+
+def read_grain_frame(path, name):
+    h5py = _h5()
+    with h5py.File(path, "r") as f:
+        g = f[name]
+        d = {k: np.asarray(g[k]) for k in g.keys()}
+        d["time"] = float(g.attrs["time"])
+    return d
+
+
+def rotation_y(angle):
+    """The rim-to-world rotation of fem_server (rotation_about_y)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def tensor6_to_matrix(t6):
+    """(n, 6) XDMF Tensor6 (xx xy xz yy yz zz) -> (n, 3, 3) symmetric."""
+    xx, xy, xz, yy, yz, zz = (t6[:, k] for k in range(6))
+    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], -2)
+
+
+def boundary_faces(tets):
+    """Faces of a tetrahedral mesh that belong to one tetrahedron only:
+    (faces (m, 3) node indices, owning tetrahedron (m,))."""
+    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
+    faces = tets[:, local].reshape(-1, 3)
+    owner = np.repeat(np.arange(len(tets)), 4)
+    key = np.sort(faces, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    once = counts[inv.ravel()] == 1
+    return faces[once], owner[once]
+
+
+def read_scene_wheel_y(outdir):
+    """wheel.center[1] from a scene file copied into the run folder (the slip
+    sweep leaves scene.cfg there), or None."""
+    import re
+    for name in sorted(os.listdir(outdir)):
+        if not name.endswith(".cfg"):
+            continue
+        text = open(os.path.join(outdir, name)).read()
+        text = re.sub(r"#[^\n]*|//[^\n]*", "", text)
+        m = re.search(r"\bwheel\s*[=:]\s*\{(.*?)\}\s*;", text, re.S)
+        if not m:
+            continue
+        c = re.search(r"\bcenter\s*[=:]\s*\[\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*\]", m.group(1))
+        if c:
+            return float(c.group(2))
+    return None

@@ -67,9 +67,8 @@ static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
     return CM_OK;
 }
 
-int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks *hooks, cm_error *err)
+int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *err)
 {
-    coupled c = {.w = w};
     ipc_attach_def ad = ipc_default_attach_def();
     ad.dt = def->dt;
     ad.exchange_every = (uint32_t)def->exchange_every;
@@ -78,9 +77,16 @@ int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks 
     ad.stop_flag = def->stop_flag;
     char ipc_err[512];
     cm_log_info("attaching to %s (dt %.3g s, exchange every %d steps)", def->shm, def->dt, def->exchange_every);
-    int rc = ipc_attach(def->shm, &ad, &c.ch, ipc_err, sizeof ipc_err);
-    if (rc)
+    if (ipc_attach(def->shm, &ad, ch, ipc_err, sizeof ipc_err))
         return cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_err);
+    return CM_OK;
+}
+
+int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
+                    cm_error *err)
+{
+    coupled c = {.w = w, .ch = ch};
+    int rc = CM_OK;
 
     c.nn = ipc_surface_node_count(c.ch);
     uint32_t nt = ipc_surface_tri_count(c.ch);

@@ -6,6 +6,7 @@
 #include <signal.h>
 
 #include "dem.h"
+#include "ipc.h"
 
 /* Status returned when the exchange or the peer failed (exit code 3). */
 #define DEM_COUPLED_PEER (-100)
@@ -31,7 +32,13 @@ typedef struct dem_coupled_hooks {
     void *user;
 } dem_coupled_hooks;
 
-/* Runs until def->end_time or until fem_server asks to stop. */
-int dem_run_coupled(dem_world *w, const dem_coupled_def *def, dem_coupled_hooks *hooks, cm_error *err);
+/* Attaches to the FEM side's segment (handshake included). Done before the
+ * bed is built, so that a long settling does not look to the FEM side like a
+ * peer that never came: from the handshake on it waits on our heartbeat. */
+int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *err);
+/* Runs until def->end_time or until fem_server asks to stop, then closes ch
+ * (the world holds its grains by then). */
+int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
+                    cm_error *err);
 
 #endif

@@ -127,6 +127,7 @@ static int run(const options *o)
     cm_error err = {0};
     cm_scene *scene = NULL;
     dem_world *w = NULL;
+    ipc_channel *ch = NULL;
     output_ctx octx = {0};
     cm_run_config rcfg;
     dem_config cfg;
@@ -150,6 +151,23 @@ static int run(const options *o)
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
     if ((rc = dem_world_from_config(&cfg, &w, &err)))
         goto fail;
+    dem_coupled_def def = {.shm = o->shm,
+                           .dt = rcfg.dt,
+                           .exchange_every = rcfg.exchange_every,
+                           .end_time = rcfg.end_time,
+                           .stall_timeout = rcfg.stall_timeout,
+                           .connect_timeout = rcfg.connect_timeout,
+                           .progress_every = rcfg.progress_every,
+                           .surface_material = surface_material,
+                           .max_overlap = rcfg.max_overlap,
+                           .stop_flag = &g_stop};
+    /* Coupled: shake hands first, so that settling a large bed does not run
+     * into the FEM side's connect timeout. */
+    if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
+        cm_log_error("%s", err.msg);
+        exit_code = g_stop ? 128 + (int)g_stop : 3;
+        goto cleanup;
+    }
 
     octx.cfg = &cfg;
     if (cfg.output_dir[0] && (rc = dem_output_open(cfg.output_dir, &octx.out, &err)))
@@ -209,20 +227,11 @@ static int run(const options *o)
         }
         exit_code = g_stop ? 128 + (int)g_stop : 0;
     } else {
-        dem_coupled_def def = {.shm = o->shm,
-                               .dt = rcfg.dt,
-                               .exchange_every = rcfg.exchange_every,
-                               .end_time = rcfg.end_time,
-                               .stall_timeout = rcfg.stall_timeout,
-                               .connect_timeout = rcfg.connect_timeout,
-                               .progress_every = rcfg.progress_every,
-                               .surface_material = surface_material,
-                               .max_overlap = rcfg.max_overlap,
-                               .bed_height = bed_height,
-                               .bed_top = bed_top,
-                               .stop_flag = &g_stop};
+        def.bed_height = bed_height;
+        def.bed_top = bed_top;
         dem_coupled_hooks hooks = {.after_exchange = after_exchange, .user = &octx};
-        rc = dem_run_coupled(w, &def, &hooks, &err);
+        rc = dem_run_coupled(w, ch, &def, &hooks, &err);
+        ch = NULL; /* closed by the run */
         if (rc == DEM_COUPLED_PEER) {
             cm_log_error("%s", err.msg);
             exit_code = g_stop ? 128 + (int)g_stop : 3;
@@ -239,8 +248,11 @@ static int run(const options *o)
     goto cleanup;
 fail:
     cm_log_error("%s", err.msg);
+    if (ch)
+        ipc_fail(ch, "dem_server: %s", err.msg);
     exit_code = 1;
 cleanup:
+    ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
     dem_output_close(&octx.out);
     dem_world_destroy(&w);
     cm_scene_close(&scene);

@@ -87,9 +87,10 @@ static double applied_load(const drive_def *d, double time)
     return d->target_load * (ramp < 1.0 ? (ramp > 0.0 ? ramp : 0.0) : 1.0);
 }
 
-/* load_travel: m z'' = F_contact - W(t), integrated with symplectic Euler
- * over each interval (the contact force is that of the interval just done). */
-static int drive_update_load(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
+/* Moves the state by the motion held during the interval just computed,
+ * and folds the interval's load into its moving average (over about
+ * load_window, so that one grain's spike does not end a phase early). */
+static void advance_interval(const drive_def *d, drive_state *s, double dt, double load)
 {
     for (int k = 0; k < 3; k++)
         s->center[k] += s->velocity[k] * dt;
@@ -100,6 +101,13 @@ static int drive_update_load(const drive_def *d, drive_state *s, double time, do
         s->travelled += s->velocity[0] * dt;
     double blend = d->load_window > dt ? dt / d->load_window : 1.0;
     s->load_avg += blend * (load - s->load_avg);
+}
+
+/* load_travel: m z'' = F_contact - W(t), integrated with symplectic Euler
+ * over each interval (the contact force is that of the interval just done). */
+static int drive_update_load(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
+{
+    advance_interval(d, s, dt, load);
     double W = applied_load(d, time);
 
     if (s->phase == DRIVE_SINK) {
@@ -138,20 +146,8 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, dou
         return CM_OK;
     if (d->motion == DRIVE_LOAD_TRAVEL)
         return drive_update_load(d, s, time, dt, load, err);
-    /* 1. Move by the motion held during the interval just computed. */
-    for (int k = 0; k < 3; k++)
-        s->center[k] += s->velocity[k] * dt;
-    s->angle += s->omega * dt;
-    if (s->phase == DRIVE_SINK)
-        s->sunk -= s->velocity[2] * dt;
-    else if (s->phase == DRIVE_TRAVEL)
-        s->travelled += s->velocity[0] * dt;
-
-    /* 2. Phase changes, from what the last intervals measured: the load is
-     * averaged over about load_window so that one grain's spike does not
-     * end the sinkage early. */
-    double blend = d->load_window > dt ? dt / d->load_window : 1.0;
-    s->load_avg += blend * (load - s->load_avg);
+    /* 1. Move; 2. phase changes from the averaged load. */
+    advance_interval(d, s, dt, load);
     if (s->phase == DRIVE_SINK && s->load_avg >= d->target_load) {
         s->phase = DRIVE_TRAVEL;
         s->t_phase = time;

@@ -83,8 +83,9 @@ static int build_interface(fem_model *m, cm_error *err)
     m->n_if_nodes = nn;
     m->n_if_tris = nt;
     m->if_nodes = malloc((nn ? nn : 1) * sizeof *m->if_nodes);
+    m->if_force = calloc(3 * (nn ? nn : 1), sizeof *m->if_force);
     m->if_tris = malloc((size_t)3 * (nt ? nt : 1) * sizeof *m->if_tris);
-    if (!m->if_nodes || !m->if_tris) {
+    if (!m->if_nodes || !m->if_tris || !m->if_force) {
         free(map);
         return cm_fail(err, CM_ERR_NOMEM, "fem: out of memory");
     }
@@ -202,6 +203,7 @@ void fem_destroy(fem_model **pm)
     fem_mesh_free(&m->mesh);
     free(m->b_pressure);
     free(m->if_nodes);
+    free(m->if_force);
     free(m->if_tris);
     free(m);
     *pm = NULL;
@@ -216,6 +218,10 @@ void fem_model_build_load(fem_model *m, const double *f_iface)
      * lumped mass of eq. 33 is exactly int rho N_i) */
     for (int d = 0; d < s->n_dof; d++)
         s->f[d] = m->b_pressure[d] + s->mass[d] * g[d % 3];
+    if (f_iface)
+        memcpy(m->if_force, f_iface, 3 * (size_t)m->n_if_nodes * sizeof *m->if_force);
+    else
+        memset(m->if_force, 0, 3 * (size_t)m->n_if_nodes * sizeof *m->if_force);
     if (f_iface)
         for (uint32_t k = 0; k < m->n_if_nodes; k++) {
             double fr[3];

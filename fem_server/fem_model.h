@@ -16,6 +16,7 @@ struct fem_model {
     /* DEM interface */
     uint32_t n_if_nodes, n_if_tris;
     uint32_t *if_nodes;     /* mesh node ids */
+    double *if_force;       /* 3 per interface node: the last DEM forces, world frame, N (output) */
     uint32_t *if_tris;      /* 3 per triangle, into if_nodes */
     fem_wheel wheel;
     fem_stability stab;

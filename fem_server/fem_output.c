@@ -15,7 +15,7 @@
 struct fem_output {
     cm_h5 *h5;
     cm_h5_series *series;
-    double *pos, *disp, *strain, *stress, *e22, *e33; /* snapshot buffers, allocated once */
+    double *pos, *disp, *force, *strain, *stress, *e22, *e33; /* snapshot buffers, allocated once */
 };
 
 static const char *const k_columns[] = {"time", "elastic", "kinetic", "rim_Fx", "rim_Fy", "rim_Fz",
@@ -33,13 +33,14 @@ int fem_output_open(struct fem_model *m, const char *dir, fem_output **out, cm_e
     size_t nn = (size_t)m->mesh.n_nodes, ne = (size_t)m->mesh.n_tets;
     o->pos = malloc(3 * nn * sizeof(double));
     o->disp = malloc(3 * nn * sizeof(double));
+    o->force = calloc(3 * nn, sizeof(double)); /* zero off the interface, always */
     o->strain = malloc(6 * ne * sizeof(double));
     o->stress = malloc(6 * ne * sizeof(double));
     o->e22 = malloc(ne * sizeof(double));
     o->e33 = malloc(ne * sizeof(double));
     int *conn = malloc(4 * ne * sizeof(int));
     int rc = CM_OK;
-    if (!o->pos || !o->disp || !o->strain || !o->stress || !o->e22 || !o->e33 || !conn) {
+    if (!o->pos || !o->disp || !o->force || !o->strain || !o->stress || !o->e22 || !o->e33 || !conn) {
         rc = cm_fail(err, CM_ERR_NOMEM, "fem output: out of memory");
         goto done;
     }
@@ -107,6 +108,10 @@ int fem_output_snapshot(fem_output *o, struct fem_model *m, cm_error *err)
             o->disp[3 * n + a] = w->R[3 * a] * un[0] + w->R[3 * a + 1] * un[1] + w->R[3 * a + 2] * un[2];
         }
     }
+    /* The grains' forces on the tire as the FEM received them (eq. 42 nodal
+     * forces, world frame), zero on nodes off the interface. */
+    for (uint32_t k = 0; k < m->n_if_nodes; k++)
+        memcpy(&o->force[3 * (size_t)m->if_nodes[k]], &m->if_force[3 * (size_t)k], 3 * sizeof(double));
     for (int e = 0; e < me->n_tets; e++) {
         const int32_t *t = &me->tets[4 * e];
         double g[4][3], ue[4][3], eps[6], sig[6];
@@ -130,6 +135,7 @@ int fem_output_snapshot(fem_output *o, struct fem_model *m, cm_error *err)
     if ((rc = cm_h5_step_begin(o->h5, m->s->steps, m->s->time, err)) ||
         (rc = cm_h5_step_doubles(o->h5, "position", CM_H5_NODE, o->pos, nn, 3, err)) ||
         (rc = cm_h5_step_doubles(o->h5, "displacement", CM_H5_NODE, o->disp, nn, 3, err)) ||
+        (rc = cm_h5_step_doubles(o->h5, "contact_force", CM_H5_NODE, o->force, nn, 3, err)) ||
         (rc = cm_h5_step_doubles(o->h5, "strain", CM_H5_CELL, o->strain, ne, 6, err)) ||
         (rc = cm_h5_step_doubles(o->h5, "stress", CM_H5_CELL, o->stress, ne, 6, err)) ||
         (rc = cm_h5_step_doubles(o->h5, "eps22", CM_H5_CELL, o->e22, ne, 1, err)) ||
@@ -160,6 +166,7 @@ int fem_output_close(fem_output **po, cm_error *err)
     int rc = o->h5 ? cm_h5_close(&o->h5, err) : CM_OK;
     free(o->pos);
     free(o->disp);
+    free(o->force);
     free(o->strain);
     free(o->stress);
     free(o->e22);

@@ -1172,7 +1172,19 @@ static int snapshot_world_frame(void)
     ENSURE(fem_solve_static(m, &err) == CM_OK);
     fem_wheel w = {.center = {1.0, 2.0, 3.0}, .R = {0, 0, 1, 0, 1, 0, -1, 0, 0}}; /* 90 deg about +y */
     ENSURE(fem_set_wheel(m, &w, &err) == CM_OK);
+    /* One DEM force on interface node 5: the snapshot shows it there. */
+    uint32_t nif, ntf;
+    fem_interface_count(m, &nif, &ntf);
+    double *fi = calloc(3 * (size_t)nif, sizeof *fi);
+    uint32_t *ids = malloc((size_t)nif * sizeof *ids);
+    ENSURE(fi && ids);
+    fem_interface_nodes(m, ids);
+    fi[3 * 5 + 0] = 1.5, fi[3 * 5 + 2] = -2.5;
+    ENSURE(fem_advance(m, fi, 1e-6, &err) == CM_OK);
     ENSURE_MSG(fem_write_snapshot(m, &err) == CM_OK, "%s", err.msg);
+    int fnode = (int)ids[5];
+    free(fi);
+    free(ids);
     /* Expected, from the rim-frame state. */
     int nn, ne;
     fem_mesh_size(m, &nn, &ne);
@@ -1204,6 +1216,19 @@ static int snapshot_world_frame(void)
     hid_t d = H5Dopen2(f, path, H5P_DEFAULT);
     ENSURE(d >= 0 && H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, pos) >= 0);
     H5Dclose(d);
+    double *cf = malloc(3 * (size_t)nn * sizeof *cf);
+    ENSURE(cf);
+    snprintf(path, sizeof path, "/steps/%s/contact_force", name);
+    d = H5Dopen2(f, path, H5P_DEFAULT);
+    ENSURE(d >= 0 && H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, cf) >= 0);
+    H5Dclose(d);
+    double fsum[3] = {0, 0, 0};
+    for (int q = 0; q < nn; q++)
+        for (int a = 0; a < 3; a++)
+            fsum[a] += cf[3 * q + a];
+    ENSURE(cf[3 * fnode] == 1.5 && cf[3 * fnode + 2] == -2.5);
+    ENSURE(fsum[0] == 1.5 && fsum[1] == 0.0 && fsum[2] == -2.5); /* nowhere else */
+    free(cf);
     snprintf(path, sizeof path, "/steps/%s/eps33", name);
     d = H5Dopen2(f, path, H5P_DEFAULT);
     ENSURE(d >= 0 && H5Dread(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, e33) >= 0);

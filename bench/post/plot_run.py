@@ -202,10 +202,21 @@ class Scene3D:
         self.center = np.array([xc, wheel_y if wheel_y is not None else 0.0, zc])
         R = runio.rotation_y(self.angle)
         self.R = R
-        self.pos_rim = pos
         self.faces = faces
         self.owner = owner
         eps = runio.tensor6_to_matrix(s["strain"])
+        # fem_server writes snapshots in the world frame (positions c + R(X+u),
+        # strain R e R^T); older files were in the rim frame.
+        self.world_frame = runio.fem_world_frame(fem)
+        if self.world_frame:
+            if wheel_y is None:
+                self.center[1] = float(pos[:, 1].mean())
+                wheel_y = self.center[1]
+            self.pos_rim = (pos - self.center) @ R
+            self.world = pos
+            eps = np.einsum("ba,nbc,cd->nad", R, eps, R)  # back to the rim frame: R^T e R
+        else:
+            self.pos_rim = pos
         if rim_frame:
             self.eps_travel = s["eps22"] if "eps22" in s else eps[:, 1, 1]
             self.eps_vert = s["eps33"] if "eps33" in s else eps[:, 2, 2]
@@ -237,7 +248,8 @@ class Scene3D:
                     "(give --wheel-y or put the scene file in the run folder)" % self.center[1])
             else:
                 log("wheel centre y not known and no grains: y = 0")
-        self.world = self.center + pos @ R.T
+        if not self.world_frame:
+            self.world = self.center + pos @ R.T
 
     def faces_for_view(self, view_axis, sign):
         """Visible faces for a viewer looking along sign * axis, far to near."""

@@ -63,6 +63,17 @@ def fem_snapshots(path):
     return out
 
 
+def fem_world_frame(path):
+    """Whether fem.h5 holds world-frame snapshots (fem_server since the
+    contact_force field; the root attribute "units" says so)."""
+    h5py = _h5()
+    with h5py.File(path, "r") as f:
+        units = f.attrs.get("units", b"")
+        if isinstance(units, bytes):
+            units = units.decode("utf-8", "replace")
+        return "world frame" in str(units)
+
+
 def read_fem_mesh(path):
     h5py = _h5()
     with h5py.File(path, "r") as f:

@@ -1,6 +1,8 @@
 /* dem: discrete element side of the DEM–FEM tire tread co-simulation.
  *
- * Spherical grains, Hertz–Mindlin contacts (normal Hertz force with a
+ * Spherical grains (and, mixed with them, ellipsoids and convex polyhedra:
+ * dem_shape_add / dem_grain_add_shape, rotation by Euler's equations with a
+ * quaternion, libccd narrow phase; README "Non-spherical grains"), Hertz–Mindlin contacts (normal Hertz force with a
  * restitution-calibrated dashpot, Mindlin tangential spring with history and
  * Coulomb cap, optional constant-torque rolling resistance), planar walls and
  * one deformable triangle surface (the FE tire's outer skin), integrated with
@@ -98,6 +100,11 @@ typedef struct dem_grain_state {
     double radius;   /* m */
     double mass;     /* kg */
     int material;
+    /* non-spherical grains (dem_grain_add_shape); spheres: shape = -1, scale = 1,
+     * inertia = (2/5 m r^2) x 3 and radius is the sphere's */
+    int shape;          /* shape id, -1 = sphere */
+    double scale;       /* length factor applied to the shape */
+    double inertia[3];  /* principal moments of inertia, kg m^2 (body frame, see dem_shape_info) */
 } dem_grain_state;
 
 /* Adds a grain at rest; *id (may be NULL) receives its id (0, 1, 2, ... in
@@ -107,6 +114,56 @@ int dem_grain_count(const dem_world *w);
 int dem_grain_get(const dem_world *w, int id, dem_grain_state *s);
 /* Sets position, velocity and angular velocity (the rest of s is ignored). */
 int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], const double omega[3]);
+
+/* ---- Non-spherical grains ------------------------------------------- */
+
+/* A grain class: convex shape in its own frame (m). The world stores it in its
+ * principal frame about its centre of mass (dem_shape_info gives both), and a
+ * grain of the class is posed by its centre of mass and a unit quaternion
+ * rotating that principal frame into the world. Spheres keep their own fast
+ * path (dem_grain_add); a scene may mix both. */
+enum dem_shape_type { DEM_SHAPE_SPHERE = 0, DEM_SHAPE_ELLIPSOID = 1, DEM_SHAPE_POLYHEDRON = 2 };
+#define DEM_SHAPE_MAX_VERTS 64
+#define DEM_MAX_SHAPES 256
+
+typedef struct dem_shape_def {
+    int type;                             /* enum dem_shape_type */
+    double radius;                        /* sphere, m */
+    double semi_axes[3];                  /* ellipsoid, m (any order; principal frame sorts them) */
+    int n_verts;                          /* polyhedron: 4..DEM_SHAPE_MAX_VERTS points, */
+    double verts[DEM_SHAPE_MAX_VERTS][3]; /* m; their convex hull is the grain */
+} dem_shape_def;
+
+typedef struct dem_shape_info {
+    int type;
+    double volume;       /* m^3 */
+    double r_bound;      /* bounding-sphere radius about the centre of mass, m (broad phase) */
+    double r_eq;         /* radius of the sphere of equal volume, m */
+    double inertia[3];   /* principal moments per unit density, m^5 (x density = kg m^2), ascending */
+    double com[3];       /* centre of mass in the frame of the definition, m */
+    double axes[9];      /* principal axes as columns, in the frame of the definition */
+    int n_verts;         /* polyhedron: hull vertices (principal frame) */
+    int n_faces;         /* polyhedron: hull faces (planes) */
+} dem_shape_info;
+
+/* Random angular grain: n_verts points on an ellipsoid of axis ratios
+ * elongation : 1 : 1 with radial jitter (angularity), rescaled so that the
+ * volume-equivalent radius is r_eq. The same seed gives the same grain. */
+int dem_shape_random_polyhedron(uint64_t seed, double r_eq, double elongation, int n_verts, dem_shape_def *out,
+                                cm_error *err);
+/* Mass properties of a definition (hull, volume, centre of mass, principal
+ * inertia); no world needed. */
+int dem_shape_compute(const dem_shape_def *def, dem_shape_info *info, cm_error *err);
+/* Registers a shape in the world; *shape receives its id (0, 1, ...). */
+int dem_shape_add(dem_world *w, const dem_shape_def *def, int *shape, cm_error *err);
+int dem_shape_get_info(const dem_world *w, int shape, dem_shape_info *info);
+/* Adds a grain of shape `shape` scaled by `scale` (lengths; mass ~ scale^3)
+ * with its centre of mass at x and orientation q (w, x, y, z; normalised
+ * here; NULL = identity) at rest. */
+int dem_grain_add_shape(dem_world *w, const double x[3], const double q[4], int shape, double scale, int material,
+                        int *id, cm_error *err);
+/* Sets the orientation of a grain (normalised here). */
+int dem_grain_set_orientation(dem_world *w, int id, const double q[4]);
 
 /* ---- Walls ------------------------------------------------------------ */
 
@@ -192,9 +249,23 @@ int dem_world_material_count(const dem_world *w);
 
 #define DEM_MAX_LAYERS 8
 
+/* Shape of the grains of a bed layer. Sizes are relative: each grain is
+ * scaled so that its volume-equivalent radius is the layer's drawn radius
+ * (same mass as the sphere of that radius). */
+typedef struct dem_bed_shape {
+    int type;               /* enum dem_shape_type; DEM_SHAPE_SPHERE (0) = spheres */
+    double semi_axes[3];    /* ellipsoid: axis ratios */
+    int n_verts;            /* polyhedron: explicit vertices (relative), or 0 = random angular grains */
+    double verts[DEM_SHAPE_MAX_VERTS][3];
+    double elongation;      /* random grains: long / short axis ratio, >= 1 */
+    int random_verts;       /* random grains: vertices per grain */
+    int variants;           /* random grains: distinct shapes in the layer */
+} dem_bed_shape;
+
 typedef struct dem_bed_layer {
     int count;          /* grains in the layer */
-    double radius[2];   /* radius range [min, max], m, uniform distribution */
+    double radius[2];   /* radius range [min, max], m, uniform distribution (volume-equivalent for shapes) */
+    dem_bed_shape shape; /* zero-initialised = spheres */
 } dem_bed_layer;
 
 typedef struct dem_bed_params {

@@ -43,6 +43,59 @@ static double mean_volume(double a, double b)
     return (4.0 / 3.0) * M_PI * (pow(b, 4) - pow(a, 4)) / (4.0 * (b - a));
 }
 
+/* The shapes of the bed's layers, created in w in a fixed order (the same
+ * for placing and for reloading a cached bed): per layer, one shape
+ * (ellipsoid, explicit polyhedron) or `variants` random polyhedra, each of
+ * unit volume-equivalent radius (a grain of drawn radius r is the shape
+ * scaled by r). first[k]: id of layer k's first shape (-1: spheres),
+ * count[k] shapes, bfac[k] = largest r_bound / r_eq (placement radius). */
+static int bed_shapes(dem_world *w, const dem_bed_params *p, int *first, int *count, double *bfac, cm_error *err)
+{
+    for (int k = 0; k < p->n_layers; k++) {
+        const dem_bed_shape *bs = &p->layers[k].shape;
+        first[k] = -1, count[k] = 0, bfac[k] = 1.0;
+        if (bs->type == DEM_SHAPE_SPHERE)
+            continue;
+        int nv = bs->type == DEM_SHAPE_POLYHEDRON && bs->n_verts == 0 ? (bs->variants > 0 ? bs->variants : 1) : 1;
+        for (int v = 0; v < nv; v++) {
+            dem_shape_def d;
+            memset(&d, 0, sizeof d);
+            int rc = CM_OK;
+            if (bs->type == DEM_SHAPE_ELLIPSOID) {
+                d.type = DEM_SHAPE_ELLIPSOID;
+                double f = cbrt(bs->semi_axes[0] * bs->semi_axes[1] * bs->semi_axes[2]);
+                for (int c = 0; c < 3; c++)
+                    d.semi_axes[c] = f > 0.0 ? bs->semi_axes[c] / f : 0.0;
+            } else if (bs->n_verts > 0) {
+                d.type = DEM_SHAPE_POLYHEDRON;
+                d.n_verts = bs->n_verts;
+                memcpy(d.verts, bs->verts, sizeof d.verts);
+                dem_shape_info in;
+                if ((rc = dem_shape_compute(&d, &in, err)) == CM_OK)
+                    for (int t = 0; t < d.n_verts; t++)
+                        for (int c = 0; c < 3; c++)
+                            d.verts[t][c] /= in.r_eq;
+            } else {
+                uint64_t seed = p->seed * 1000003ULL + (uint64_t)k * 7919ULL + (uint64_t)v;
+                rc = dem_shape_random_polyhedron(seed, 1.0, bs->elongation >= 1.0 ? bs->elongation : 1.0,
+                                                 bs->random_verts > 0 ? bs->random_verts : 12, &d, err);
+            }
+            int id;
+            if (rc || (rc = dem_shape_add(w, &d, &id, err))) {
+                cm_fail_prefix(err, "bed layer %d shape: ", k);
+                return rc;
+            }
+            dem_shape_info in;
+            dem_shape_get_info(w, id, &in);
+            bfac[k] = fmax(bfac[k], in.r_bound / in.r_eq);
+            if (v == 0)
+                first[k] = id;
+            count[k]++;
+        }
+    }
+    return CM_OK;
+}
+
 int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
 {
     if (w->g.n != 0)
@@ -50,16 +103,24 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
     double lx = p->box_max[0] - p->box_min[0], ly = p->box_max[1] - p->box_min[1];
     double rmax = 0.0, total_h = 0.0;
     double hl[DEM_MAX_LAYERS];
+    int sh_first[DEM_MAX_LAYERS], sh_count[DEM_MAX_LAYERS];
+    double bfac[DEM_MAX_LAYERS];
+    int rcs = bed_shapes(w, p, sh_first, sh_count, bfac, err);
+    if (rcs)
+        return rcs;
     long total = 0;
     for (int k = 0; k < p->n_layers; k++) {
         const dem_bed_layer *L = &p->layers[k];
-        rmax = fmax(rmax, L->radius[1]);
+        /* shaped grains are placed by their bounding spheres (bfac r) */
+        double b = bfac[k];
+        rmax = fmax(rmax, b * L->radius[1]);
         /* centres keep r from the side walls: fill the reachable volume */
-        double a_eff = (lx - 2 * L->radius[1]) * (ly - 2 * L->radius[1]);
-        hl[k] = L->count * mean_volume(L->radius[0], L->radius[1]) / (p->fill_fraction * a_eff) + 2 * L->radius[1];
+        double a_eff = (lx - 2 * b * L->radius[1]) * (ly - 2 * b * L->radius[1]);
+        hl[k] = L->count * mean_volume(b * L->radius[0], b * L->radius[1]) / (p->fill_fraction * a_eff) +
+                2 * b * L->radius[1];
         total_h += hl[k];
         total += L->count;
-        if (2.0 * L->radius[1] >= fmin(lx, ly))
+        if (2.0 * b * L->radius[1] >= fmin(lx, ly))
             return cm_fail(err, CM_ERR_RANGE, "bed layer %d: grains of radius %g m do not fit the %g x %g m box", k,
                            L->radius[1], lx, ly);
     }
@@ -75,8 +136,9 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
     int *next = malloc((size_t)total * sizeof *next);
     double *pos = malloc((size_t)total * 4 * sizeof *pos);
     int *mat_of = malloc((size_t)total * sizeof *mat_of);
-    if (!head || !next || !pos || !mat_of) {
-        free(head), free(next), free(pos), free(mat_of);
+    double *qsc = malloc((size_t)total * 6 * sizeof *qsc); /* q[4], scale, shape id */
+    if (!head || !next || !pos || !mat_of || !qsc) {
+        free(head), free(next), free(pos), free(mat_of), free(qsc);
         return cm_fail(err, CM_ERR_NOMEM, "bed: out of memory for %ld grains", total);
     }
     memset(head, 0xff, (size_t)ncell * sizeof *head);
@@ -87,6 +149,21 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
         const dem_bed_layer *L = &p->layers[k];
         for (int c = 0; c < L->count; c++) {
             double r = L->radius[0] + (L->radius[1] - L->radius[0]) * rng_uniform(&rs);
+            double r_eq = r;
+            if (sh_first[k] >= 0) { /* shape variant, uniform random orientation (Shoemake) */
+                int v = sh_count[k] > 1 ? (int)(rng_uniform(&rs) * sh_count[k]) : 0;
+                dem_shape_info in;
+                dem_shape_get_info(w, sh_first[k] + (v < sh_count[k] ? v : sh_count[k] - 1), &in);
+                double u1 = rng_uniform(&rs), u2 = 2 * M_PI * rng_uniform(&rs), u3 = 2 * M_PI * rng_uniform(&rs);
+                double *qq = qsc + 6 * n;
+                qq[0] = sqrt(1 - u1) * sin(u2), qq[1] = sqrt(1 - u1) * cos(u2);
+                qq[2] = sqrt(u1) * sin(u3), qq[3] = sqrt(u1) * cos(u3);
+                qq[4] = r_eq;
+                qq[5] = sh_first[k] + (v < sh_count[k] ? v : sh_count[k] - 1);
+                r = r_eq * in.r_bound / in.r_eq; /* placement by the bounding sphere */
+            } else {
+                qsc[6 * n + 5] = -1;
+            }
             int placed = 0;
             for (int tries = 0; tries < 100000 && !placed; tries++) {
                 double x = p->box_min[0] + r + (lx - 2 * r) * rng_uniform(&rs);
@@ -127,9 +204,12 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
         }
         z0 += hl[k];
     }
-    for (int i = 0; i < n && rc == CM_OK; i++)
-        rc = dem_grain_add(w, pos + 4 * i, pos[4 * i + 3], mat_of[i], NULL, err);
-    free(head), free(next), free(pos), free(mat_of);
+    for (int i = 0; i < n && rc == CM_OK; i++) {
+        const double *qq = qsc + 6 * i;
+        rc = qq[5] < 0 ? dem_grain_add(w, pos + 4 * i, pos[4 * i + 3], mat_of[i], NULL, err)
+                       : dem_grain_add_shape(w, pos + 4 * i, qq, (int)qq[5], qq[4], mat_of[i], NULL, err);
+    }
+    free(head), free(next), free(pos), free(mat_of), free(qsc);
     return rc;
 }
 
@@ -203,8 +283,19 @@ void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf,
 #define PUT(...) (o += snprintf(buf + o, o < len ? (size_t)(len - o) : 0, __VA_ARGS__))
     PUT("dem-bed-v1;box=%.17g,%.17g,%.17g,%.17g,%.17g,%.17g;", p->box_min[0], p->box_min[1], p->box_min[2],
         p->box_max[0], p->box_max[1], p->box_max[2]);
-    for (int k = 0; k < p->n_layers; k++)
+    for (int k = 0; k < p->n_layers; k++) {
         PUT("layer%d=%d:%.17g:%.17g;", k, p->layers[k].count, p->layers[k].radius[0], p->layers[k].radius[1]);
+        const dem_bed_shape *bs = &p->layers[k].shape;
+        if (bs->type != DEM_SHAPE_SPHERE) { /* sphere beds keep their v1 text (caches stay valid) */
+            uint64_t vh = 1469598103934665603ULL;
+            const unsigned char *b = (const unsigned char *)bs->verts;
+            for (size_t t = 0; t < (size_t)bs->n_verts * 3 * sizeof(double); t++)
+                vh = (vh ^ b[t]) * 1099511628211ULL;
+            PUT("shape%d=%d:%.17g,%.17g,%.17g:%d:%016llx:%.17g:%d:%d;", k, bs->type, bs->semi_axes[0],
+                bs->semi_axes[1], bs->semi_axes[2], bs->n_verts, (unsigned long long)vh, bs->elongation,
+                bs->random_verts, bs->variants);
+        }
+    }
     int mats[2] = {p->material, p->wall_material};
     for (int k = 0; k < 2; k++) {
         const dem_material *m = dem_world_material(w, mats[k]);
@@ -290,6 +381,25 @@ int dem_bed_save(const dem_world *w, const dem_bed_params *p, const char *path, 
             h5_write(f, "material", H5T_NATIVE_INT, 1, d1, mat) || h5_attr_string(f, "params", text) ||
             h5_attr_string(f, "params_hash", hs))
             rc = cm_fail(err, CM_ERR_IO, "%s: writing the bed failed", tmp);
+        if (rc == CM_OK && w->n_shaped > 0) {
+            /* shaped grains: orientation (n x 4), shape id (-1 sphere) and scale */
+            double *q = malloc((size_t)n * 4 * sizeof *q), *sc = malloc((size_t)n * sizeof *sc);
+            int *sh = malloc((size_t)n * sizeof *sh);
+            hsize_t d4[2] = {(hsize_t)n, 4};
+            if (!q || !sc || !sh)
+                rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
+            for (int id = 0; id < n && rc == CM_OK; id++) {
+                int i = g->slot_of[id];
+                memcpy(q + 4 * id, g->q + 4 * i, 4 * sizeof *q);
+                sc[id] = g->sc[i];
+                sh[id] = g->shape[i];
+            }
+            if (rc == CM_OK &&
+                (h5_write(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, q) || h5_write(f, "shape", H5T_NATIVE_INT, 1, d1, sh) ||
+                 h5_write(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, sc)))
+                rc = cm_fail(err, CM_ERR_IO, "%s: writing the grain shapes failed", tmp);
+            free(q), free(sc), free(sh);
+        }
         if (H5Fclose(f) < 0 && rc == CM_OK)
             rc = cm_fail(err, CM_ERR_IO, "%s: closing failed", tmp);
     }
@@ -370,23 +480,37 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
     }
     double *xyz = malloc((size_t)n * 3 * sizeof *xyz), *rad = malloc((size_t)n * sizeof *rad);
     int *mat = malloc((size_t)n * sizeof *mat);
+    int shaped = 0;
+    for (int k = 0; k < p->n_layers; k++)
+        shaped |= p->layers[k].shape.type != DEM_SHAPE_SPHERE;
+    double *q = shaped ? malloc((size_t)n * 4 * sizeof *q) : NULL, *sc = shaped ? malloc((size_t)n * sizeof *sc) : NULL;
+    int *sh = shaped ? malloc((size_t)n * sizeof *sh) : NULL;
     int rc = CM_OK;
-    hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n};
-    if (!xyz || !rad || !mat)
+    hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n}, d4[2] = {(hsize_t)n, 4};
+    if (!xyz || !rad || !mat || (shaped && (!q || !sc || !sh)))
         rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
     else if (h5_read(f, "position", H5T_NATIVE_DOUBLE, 2, d2, xyz) || h5_read(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, rad) ||
              h5_read(f, "material", H5T_NATIVE_INT, 1, d1, mat))
         rc = cm_fail(err, CM_ERR_PARSE, "%s: position/radius/material datasets unreadable", path);
+    else if (shaped && (h5_read(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, q) ||
+                        h5_read(f, "shape", H5T_NATIVE_INT, 1, d1, sh) || h5_read(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, sc)))
+        rc = cm_fail(err, CM_ERR_PARSE, "%s: orientation/shape/scale datasets unreadable", path);
     H5Fclose(f);
+    int sh_first[DEM_MAX_LAYERS], sh_count[DEM_MAX_LAYERS];
+    double bfac[DEM_MAX_LAYERS];
+    if (rc == CM_OK && shaped)
+        rc = bed_shapes(w, p, sh_first, sh_count, bfac, err); /* the same shapes, the same ids */
     for (long i = 0; i < n && rc == CM_OK; i++) {
         if (!isfinite(xyz[3 * i]) || !isfinite(xyz[3 * i + 1]) || !isfinite(xyz[3 * i + 2]) || !(rad[i] > 0.0))
             rc = cm_fail(err, CM_ERR_PARSE, "%s: grain %ld has a bad position or radius", path, i);
+        else if (shaped && sh[i] >= 0) /* checked by dem_grain_add_shape (shape id, scale) */
+            rc = dem_grain_add_shape(w, xyz + 3 * i, q + 4 * i, sh[i], sc[i], mat[i], NULL, err);
         else
             rc = dem_grain_add(w, xyz + 3 * i, rad[i], mat[i], NULL, err);
         if (rc && err)
             cm_fail_prefix(err, "%s: ", path);
     }
-    free(xyz), free(rad), free(mat);
+    free(xyz), free(rad), free(mat), free(q), free(sc), free(sh);
     return rc;
 }
 

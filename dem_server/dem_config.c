@@ -75,6 +75,56 @@ static int read_walls(cm_scene *s, dem_config *c, cm_error *err)
     return CM_OK;
 }
 
+/* dem.bed.layers.[k].shape = { type = "sphere" | "ellipsoid" | "polyhedron"; ... }
+ * (README: sizes are relative, each grain is scaled to the layer's drawn
+ * volume-equivalent radius). */
+static int read_layer_shape(cm_scene *s, int k, dem_bed_shape *bs, cm_error *err)
+{
+    static const char *const types[] = {"sphere", "ellipsoid", "polyhedron", NULL};
+    char p[160], base[96];
+    snprintf(base, sizeof base, "dem.bed.layers.[%d].shape", k);
+    memset(bs, 0, sizeof *bs);
+    if (!cm_scene_has(s, base))
+        return CM_OK;
+    int rc;
+#define KEY(name) (snprintf(p, sizeof p, "%s." name, base), p)
+    if ((rc = cm_scene_choice(s, KEY("type"), types, &bs->type, err)))
+        return rc;
+    if (bs->type == DEM_SHAPE_ELLIPSOID)
+        return cm_scene_doubles(s, KEY("semi_axes"), 3, 1e-3, 1e3, bs->semi_axes, err);
+    if (bs->type != DEM_SHAPE_POLYHEDRON)
+        return CM_OK;
+    if (cm_scene_has(s, KEY("vertices"))) {
+        int n = cm_scene_length(s, p);
+        if (n < 4 || n > DEM_SHAPE_MAX_VERTS)
+            return cm_fail(err, CM_ERR_RANGE, "%s: %s lists %d vertices (4..%d)", cm_scene_path(s), p, n,
+                           DEM_SHAPE_MAX_VERTS);
+        bs->n_verts = n;
+        for (int v = 0; v < n; v++) {
+            snprintf(p, sizeof p, "%s.vertices.[%d]", base, v);
+            if ((rc = cm_scene_doubles(s, p, 3, -1e3, 1e3, bs->verts[v], err)))
+                return rc;
+        }
+        dem_shape_def d = {.type = DEM_SHAPE_POLYHEDRON, .n_verts = n};
+        memcpy(d.verts, bs->verts, sizeof d.verts);
+        dem_shape_info in;
+        if ((rc = dem_shape_compute(&d, &in, err))) {
+            cm_fail_prefix(err, "%s: %s.vertices: ", cm_scene_path(s), base);
+            return rc;
+        }
+        return CM_OK;
+    }
+    long nv = 12, var = 16;
+    if ((rc = cm_scene_double_opt(s, KEY("elongation"), 1.0, 10.0, 1.0, &bs->elongation, err)) ||
+        (rc = cm_scene_int_opt(s, KEY("random_vertices"), 6, DEM_SHAPE_MAX_VERTS, 12, &nv, err)) ||
+        (rc = cm_scene_int_opt(s, KEY("variants"), 1, 64, 16, &var, err)))
+        return rc;
+    bs->random_verts = (int)nv;
+    bs->variants = (int)var;
+#undef KEY
+    return CM_OK;
+}
+
 static int read_bed(cm_scene *s, dem_config *c, cm_error *err)
 {
     dem_bed_params *b = &c->bed;
@@ -127,6 +177,8 @@ static int read_bed(cm_scene *s, dem_config *c, cm_error *err)
             return rc;
         if (b->layers[k].radius[1] < b->layers[k].radius[0])
             return cm_fail(err, CM_ERR_RANGE, "%s: %s: [min, max] with max < min", cm_scene_path(s), p);
+        if ((rc = read_layer_shape(s, k, &b->layers[k].shape, err)))
+            return rc;
     }
     return CM_OK;
 }

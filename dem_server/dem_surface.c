@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "dem_contact.h"
+#include "dem_shape.h"
 #include "dem_world.h"
 #include "vec3.h"
 
@@ -342,6 +343,154 @@ static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, in
     return k;
 }
 
+/* Contacts of a shaped grain (slot i, bounding radius r about c) with the
+ * surface: every triangle whose closest point is within r goes to libccd
+ * (MPR, started from the triangle's closest point to the centre; normal from
+ * the triangle to the grain). The contact point is the grain's deepest point
+ * along -n (polyhedra: the weighted mean of the vertices in the overlap)
+ * moved by the depth onto the triangle, then its closest point on the
+ * triangle (barycentric weights for eq. 42). De-duplication: an edge or
+ * vertex contact is dropped when a triangle sharing that feature is deeper
+ * (as for spheres); then, deepest first, a contact is dropped when a kept one
+ * has a normal within 45° (cos > 0.7). A grain on a flat or gently curved
+ * patch overlaps several triangles (the edge of a triangle two cells away
+ * still cuts a flat ellipsoid's underside, and MPR reports it with a normal
+ * tilted by ~25°) but gets one contact; in a groove with flanks at more than
+ * 45°, one per flank. */
+static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *cd, double (*nr)[3], double *depth,
+                             double *rc, int *overflow)
+{
+    const dem_surface *s = w->surf;
+    int n = 0, stack[64], sp = 0;
+    double lo[3] = {c.x - r, c.y - r, c.z - r}, hi[3] = {c.x + r, c.y + r, c.z + r};
+    double p[3] = {c.x, c.y, c.z}, inv_l = 1.0 / r, zero[3] = {0, 0, 0};
+    double pu[DEM_SURF_MAX_CAND][3]; /* contact points before clamping to their triangle */
+    dem_body gb;
+    dem_grain_body(w, i, p, inv_l, &gb);
+    stack[sp++] = 0;
+    while (sp > 0) {
+        const dem_bvh_node *nd = &s->bvh[stack[--sp]];
+        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] ||
+            nd->lo[2] > hi[2] || nd->hi[2] < lo[2])
+            continue;
+        if (nd->right >= 0) {
+            if (sp + 2 > 64) {
+                *overflow = 1;
+                continue;
+            }
+            stack[sp++] = nd->right;
+            stack[sp++] = (int)(nd - s->bvh) + 1;
+            continue;
+        }
+        for (int k = 0; k < nd->count; k++) {
+            int t = s->perm[nd->first + k];
+            const int *tn = s->tri + 3 * t;
+            double bary[3], cp[3];
+            dem_closest_on_triangle(p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
+            double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
+            if (dx * dx + dy * dy + dz * dz >= r * r)
+                continue;
+            double v[3][3];
+            for (int a = 0; a < 3; a++)
+                for (int b = 0; b < 3; b++)
+                    v[a][b] = (s->x[3 * tn[a] + b] - p[b]) * inv_l;
+            dem_body tb;
+            dem_body_triangle(v[0], v[1], v[2], zero, &tb);
+            double dep, nn[3], pc[3];
+            if (dem_body_penetration(&tb, &gb, 0, &dep, nn, pc) != 1)
+                continue;
+            if (n == DEM_SURF_MAX_CAND) {
+                *overflow = 1;
+                continue;
+            }
+            double mn[3] = {-nn[0], -nn[1], -nn[2]}, deep[3];
+            dem_body_contact_point(&gb, nn, dep, 1.0, deep);
+            for (int b = 0; b < 3; b++)
+                deep[b] = p[b] + deep[b] * r;
+            memcpy(pu[n], deep, sizeof deep);
+            cand q;
+            q.region = dem_closest_on_triangle(deep, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], q.bary, q.p);
+            q.tri = t;
+            q.d2 = -dep; /* sorts deepest first */
+            q.keep = 1;
+            memcpy(nr[n], nn, sizeof nn);
+            depth[n] = dep * r;
+            rc[n] = dem_shape_contact_radius(gb.s, w->g.sc[i], gb.R, mn);
+            cd[n++] = q;
+        }
+    }
+    /* as for spheres: a contact whose point lies on an edge or vertex is
+     * dropped when a triangle sharing that feature has a deeper contact (the
+     * grain overlaps the neighbour of the face it really rests on) */
+    for (int a = 0; a < n; a++) {
+        int nodes[2];
+        int nf = cand_feature(s, &cd[a], nodes);
+        if (nf == 0)
+            continue;
+        for (int b = 0; b < n && cd[a].keep; b++) {
+            if (b == a || !(cd[b].d2 < cd[a].d2 - 1e-12 * r))
+                continue;
+            const int *tb = s->tri + 3 * cd[b].tri;
+            if (tri_has_node(tb, nodes[0]) && (nf == 1 || tri_has_node(tb, nodes[1])))
+                cd[a].keep = 0;
+        }
+    }
+    /* deepest first (selection by index: the side arrays move along) */
+    int m = 0;
+    for (int a = 0; a < n; a++) {
+        int best = -1;
+        for (int b = 0; b < n; b++)
+            if (cd[b].keep == 1 && (best < 0 || cd[b].d2 < cd[best].d2 || (cd[b].d2 == cd[best].d2 && cd[b].tri < cd[best].tri)))
+                best = b;
+        if (best < 0)
+            break;
+        cd[best].keep = 2; /* taken in this round */
+        int dup = 0;
+        for (int b = 0; b < m && !dup; b++)
+            dup = nr[best][0] * nr[b][0] + nr[best][1] * nr[b][1] + nr[best][2] * nr[b][2] > 0.7;
+        if (dup)
+            continue;
+        /* move best to position m (swap, including the side arrays) */
+        cand t = cd[m];
+        cd[m] = cd[best], cd[best] = t;
+        double tn[3];
+        memcpy(tn, nr[m], sizeof tn), memcpy(nr[m], nr[best], sizeof tn), memcpy(nr[best], tn, sizeof tn);
+        double td = depth[m];
+        depth[m] = depth[best], depth[best] = td;
+        td = rc[m], rc[m] = rc[best], rc[best] = td;
+        memcpy(tn, pu[m], sizeof tn), memcpy(pu[m], pu[best], sizeof tn), memcpy(pu[best], tn, sizeof tn);
+        m++;
+    }
+    /* a kept contact is carried by the triangle of its group (normals
+     * within 45°) that holds its point: a cube face lying on several
+     * triangles is pushed through its middle, not at the edge of the
+     * deepest triangle */
+    for (int a = 0; a < m; a++) {
+        int bt = -1;
+        double bd = INFINITY, bb[3], bp[3];
+        for (int b = 0; b < n; b++) {
+            if (b != a && nr[a][0] * nr[b][0] + nr[a][1] * nr[b][1] + nr[a][2] * nr[b][2] <= 0.7)
+                continue;
+            const int *tn = s->tri + 3 * cd[b].tri;
+            double bary[3], cp[3];
+            int reg = dem_closest_on_triangle(pu[a], s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
+            double dd = (cp[0] - pu[a][0]) * (cp[0] - pu[a][0]) + (cp[1] - pu[a][1]) * (cp[1] - pu[a][1]) +
+                        (cp[2] - pu[a][2]) * (cp[2] - pu[a][2]);
+            if (dd < bd * (1.0 - 1e-12)) {
+                bd = dd, bt = b;
+                memcpy(bb, bary, sizeof bb), memcpy(bp, cp, sizeof bp);
+                cd[a].region = reg;
+            }
+        }
+        if (bt >= 0 && bt != a) {
+            cd[a].tri = cd[bt].tri;
+            memcpy(cd[a].bary, bb, sizeof bb);
+            memcpy(cd[a].p, bp, sizeof bp);
+        }
+    }
+    return m;
+}
+
 int dem_surface_contacts(dem_world *w, cm_error *err)
 {
     dem_surface *s = w->surf;
@@ -371,6 +520,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         double *nf = tid == 0 ? s->node_f : s->tnode_f + (size_t)(tid - 1) * (size_t)nn3;
         dem_surface_total *tot = &s->ttot[tid];
         cand cd[DEM_SURF_MAX_CAND];
+        double sh_n[DEM_SURF_MAX_CAND][3], sh_depth[DEM_SURF_MAX_CAND], sh_r[DEM_SURF_MAX_CAND];
         for (int i = lo; i < hi; i++) {
             double r = g->r[i];
             vec3 c = v3(g->x[i], g->y[i], g->z[i]);
@@ -386,7 +536,9 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 continue;
             }
             int overflow = 0;
-            int m = grain_candidates(s, c, r, cd, &overflow);
+            const int shaped = g->shape[i] >= 0;
+            int m = shaped ? shaped_candidates(w, i, c, r, cd, sh_n, sh_depth, sh_r, &overflow)
+                           : grain_candidates(s, c, r, cd, &overflow);
             if (overflow) {
 #ifdef _OPENMP
 #pragma omp critical(dem_surface_overflow)
@@ -398,8 +550,10 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             int slot_of[DEM_SURF_MAX_CAND];
             vec3 nrm[DEM_SURF_MAX_CAND];
             for (int a = 0; a < m; a++) {
-                double d = sqrt(cd[a].d2);
-                if (d > 1e-12 * r) {
+                double d = shaped ? 0.0 : sqrt(cd[a].d2);
+                if (shaped) {
+                    nrm[a] = v3_load(sh_n[a]);
+                } else if (d > 1e-12 * r) {
                     nrm[a] = v3_scale(v3(c.x - cd[a].p[0], c.y - cd[a].p[1], c.z - cd[a].p[2]), 1.0 / d);
                 } else { /* centre on the surface: use the face normal */
                     const int *tn = s->tri + 3 * cd[a].tri;
@@ -463,14 +617,15 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                     m_pair = 1.0 / (1.0 / m_i + inv_ms);
                 }
                 double fn;
-                vec3 F = dem_hm_force(cf, nrm[a], r - sqrt(cd[a].d2), r, m_pair, vrel, dt, xi, &fn);
+                double delta = shaped ? sh_depth[a] : r - sqrt(cd[a].d2), Rc = shaped ? sh_r[a] : r;
+                vec3 F = dem_hm_force(cf, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
                 if (slot_of[a] >= 0) {
                     v3_store(xi + 3, nrm[a]);
                     xi[6] = 1.0;
                 }
                 fsum = v3_add(fsum, F);
                 tsum = v3_add(tsum, v3_cross(lever, F));
-                tsum = v3_add(tsum, dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+                tsum = v3_add(tsum, dem_rolling_torque(cf, Rc, fn, wi, 1.0 / g->inv_i[i], dt));
                 /* reaction on the surface, to the nodes by barycentric weights (eq. 42) */
                 vec3 Fs = v3_scale(F, -1.0);
                 for (int k = 0; k < 3; k++) {

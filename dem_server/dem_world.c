@@ -113,6 +113,10 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->id = xcalloc((size_t)cap, sizeof(int), &bad);
     g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
     g->surf_count = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->shape = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->sc = xcalloc((size_t)cap, sizeof(double), &bad);
+    g->inertia = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
+    g->angmom = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
     w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
@@ -144,6 +148,11 @@ void dem_world_destroy(dem_world **wp)
     free(g->id);
     free(g->slot_of);
     free(g->surf_count);
+    free(g->shape);
+    free(g->sc);
+    free(g->inertia);
+    free(g->angmom);
+    free(w->shapes);
     free(w->grain_cell);
     free(w->cell_start);
     free(w->cell_items);
@@ -200,10 +209,101 @@ int dem_grain_add(dem_world *w, const double x[3], double radius, int material, 
     memset(g->wall_hist + (size_t)i * w->wall_stride * 3, 0, (size_t)w->wall_stride * 3 * sizeof(double));
     g->wall_mask[i] = 0;
     g->surf_count[i] = 0;
+    g->shape[i] = -1;
+    g->sc[i] = 1.0;
+    for (int k = 0; k < 3; k++) {
+        g->inertia[3 * i + k] = 0.4 * m * radius * radius;
+        g->angmom[3 * i + k] = 0.0;
+    }
     w->need_rebuild = 1;
     w->prepared = 0;
     if (id)
         *id = i;
+    return CM_OK;
+}
+
+int dem_shape_add(dem_world *w, const dem_shape_def *def, int *shape, cm_error *err)
+{
+    if (w->n_shapes >= DEM_MAX_SHAPES)
+        return cm_fail(err, CM_ERR_RANGE, "dem_shape_add: at most %d shapes", DEM_MAX_SHAPES);
+    if (!w->shapes && !(w->shapes = malloc(DEM_MAX_SHAPES * sizeof *w->shapes)))
+        return cm_fail(err, CM_ERR_NOMEM, "dem_shape_add: out of memory");
+    int rc = dem_shape_build(def, &w->shapes[w->n_shapes], err);
+    if (rc) {
+        cm_fail_prefix(err, "dem_shape_add: shape %d: ", w->n_shapes);
+        return rc;
+    }
+    if (shape)
+        *shape = w->n_shapes;
+    w->n_shapes++;
+    return CM_OK;
+}
+
+int dem_shape_get_info(const dem_world *w, int shape, dem_shape_info *info)
+{
+    if (shape < 0 || shape >= w->n_shapes)
+        return CM_ERR_RANGE;
+    *info = w->shapes[shape].info;
+    return CM_OK;
+}
+
+/* L = R diag(I) R^T omega (world frame) */
+static void angmom_from_omega(const double q[4], const double I[3], const double om[3], double L[3])
+{
+    double R[9], b[3];
+    dem_quat_to_mat(q, R);
+    for (int k = 0; k < 3; k++)
+        b[k] = (R[k] * om[0] + R[3 + k] * om[1] + R[6 + k] * om[2]) * I[k];
+    for (int k = 0; k < 3; k++)
+        L[k] = R[3 * k] * b[0] + R[3 * k + 1] * b[1] + R[3 * k + 2] * b[2];
+}
+
+int dem_grain_add_shape(dem_world *w, const double x[3], const double q[4], int shape, double scale, int material,
+                        int *id, cm_error *err)
+{
+    if (shape < 0 || shape >= w->n_shapes || !(scale > 0.0) || !isfinite(scale))
+        return cm_fail(err, CM_ERR_RANGE, "dem_grain_add_shape: grain %d: shape %d (of %d), scale %g", w->g.n, shape,
+                       w->n_shapes, scale);
+    const dem_shape *s = &w->shapes[shape];
+    if (s->type == DEM_SHAPE_SPHERE) /* the sphere path */
+        return dem_grain_add(w, x, s->info.r_bound * scale, material, id, err);
+    int i = w->g.n;
+    int rc = dem_grain_add(w, x, s->info.r_bound * scale, material, id, err);
+    if (rc)
+        return rc;
+    dem_grains *g = &w->g;
+    double rho = w->mat[material].density, s3 = scale * scale * scale, s5 = s3 * scale * scale;
+    double m = rho * s->info.volume * s3;
+    g->inv_m[i] = 1.0 / m;
+    double isum = 0.0;
+    for (int k = 0; k < 3; k++) {
+        g->inertia[3 * i + k] = rho * s->info.inertia[k] * s5;
+        isum += g->inertia[3 * i + k];
+    }
+    g->inv_i[i] = 3.0 / isum; /* mean moment: rolling resistance and diagnostics only */
+    g->shape[i] = shape;
+    g->sc[i] = scale;
+    if (q)
+        dem_grain_set_orientation(w, i, q);
+    w->n_shaped++;
+    return CM_OK;
+}
+
+int dem_grain_set_orientation(dem_world *w, int id, const double q[4])
+{
+    dem_grains *g = &w->g;
+    if (id < 0 || id >= g->n)
+        return CM_ERR_RANGE;
+    int i = g->slot_of[id];
+    double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (!(n > 0.0) || !isfinite(n))
+        return CM_ERR_RANGE;
+    for (int k = 0; k < 4; k++)
+        g->q[4 * i + k] = q[k] / n;
+    if (g->shape[i] >= 0) { /* keep omega, recompute L for the new pose */
+        double om[3] = {g->wx[i], g->wy[i], g->wz[i]};
+        angmom_from_omega(g->q + 4 * i, g->inertia + 3 * i, om, g->angmom + 3 * i);
+    }
     return CM_OK;
 }
 
@@ -224,6 +324,9 @@ int dem_grain_get(const dem_world *w, int id, dem_grain_state *s)
     s->radius = g->r[i];
     s->mass = 1.0 / g->inv_m[i];
     s->material = g->mat[i];
+    s->shape = g->shape[i];
+    s->scale = g->sc[i];
+    memcpy(s->inertia, g->inertia + 3 * i, sizeof s->inertia);
     return CM_OK;
 }
 
@@ -239,8 +342,11 @@ int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], co
     }
     if (v)
         g->vx[i] = v[0], g->vy[i] = v[1], g->vz[i] = v[2];
-    if (omega)
+    if (omega) {
         g->wx[i] = omega[0], g->wy[i] = omega[1], g->wz[i] = omega[2];
+        if (g->shape[i] >= 0)
+            angmom_from_omega(g->q + 4 * i, g->inertia + 3 * i, omega, g->angmom + 3 * i);
+    }
     return CM_OK;
 }
 
@@ -251,14 +357,14 @@ void dem_grains_permute(dem_world *w, const int *order)
     int n = g->n;
     double *tmp = w->scratch; /* cap * DEM_SCRATCH_PER_GRAIN doubles: no allocation in the loop */
     double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
-                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0};
+                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
     for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++) {
         for (int i = 0; i < n; i++)
             tmp[i] = dbl[k][order[i]];
         memcpy(dbl[k], tmp, (size_t)n * sizeof *tmp);
     }
     int *itmp = (int *)tmp;
-    int *ints[] = {g->mat, g->id, g->surf_count};
+    int *ints[] = {g->mat, g->id, g->surf_count, g->shape};
     for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++) {
         for (int i = 0; i < n; i++)
             itmp[i] = ints[k][order[i]];
@@ -271,6 +377,12 @@ void dem_grains_permute(dem_world *w, const int *order)
     for (int i = 0; i < n; i++)
         memcpy(tmp + 4 * i, g->q + 4 * order[i], 4 * sizeof *tmp);
     memcpy(g->q, tmp, 4 * (size_t)n * sizeof *tmp);
+    double *d3[] = {g->inertia, g->angmom};
+    for (size_t k = 0; k < 2; k++) {
+        for (int i = 0; i < n; i++)
+            memcpy(tmp + 3 * i, d3[k] + 3 * order[i], 3 * sizeof *tmp);
+        memcpy(d3[k], tmp, 3 * (size_t)n * sizeof *tmp);
+    }
     const size_t wh = (size_t)w->wall_stride * 3;
     for (int i = 0; i < n; i++)
         memcpy(tmp + wh * i, g->wall_hist + wh * order[i], wh * sizeof *tmp);
@@ -692,6 +804,67 @@ static inline int thread_id(void)
 #endif
 }
 
+/* Gravity and walls for grain slots [lo, hi); wall forces into wf. Inlined
+ * twice with `shaped` constant: the sphere-only instance is the original
+ * loop, without a shape test. */
+static inline __attribute__((always_inline)) int walls_range(dem_world *w, int lo, int hi, double (*wf)[3],
+                                                             const int shaped)
+{
+    dem_grains *g = &w->g;
+    const int nw = w->n_walls;
+    const double dt = w->def.dt;
+    const vec3 grav = v3_load(w->def.gravity);
+    int contacts = 0;
+    for (int i = lo; i < hi; i++) {
+        double m = 1.0 / g->inv_m[i];
+        /* gravity, eq. 1 */
+        g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
+        g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
+        double r = g->r[i];
+        uint32_t mask = g->wall_mask[i];
+        for (int k = 0; k < nw; k++) {
+            const dem_wall *wl = &w->walls[k];
+            vec3 nrm = v3_load(wl->n);
+            double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
+            double delta = r - dist;
+            double *xi = g->wall_hist + ((size_t)i * nw + k) * 3;
+            if (delta <= 0.0) {
+                if (mask & (1u << k)) {
+                    xi[0] = xi[1] = xi[2] = 0.0;
+                    mask &= ~(1u << k);
+                }
+                continue;
+            }
+            if (shaped && g->shape[i] >= 0) { /* bounding sphere touches: the shape itself */
+                double F[3], T[3];
+                if (dem_shaped_wall(w, i, k, xi, F, T)) {
+                    mask |= 1u << k;
+                    contacts++;
+                    g->fx[i] += F[0], g->fy[i] += F[1], g->fz[i] += F[2];
+                    g->tx[i] += T[0], g->ty[i] += T[1], g->tz[i] += T[2];
+                    wf[k][0] -= F[0], wf[k][1] -= F[1], wf[k][2] -= F[2];
+                }
+                continue;
+            }
+            mask |= 1u << k;
+            contacts++;
+            vec3 lever = v3_scale(nrm, -dist); /* centre -> contact point on the plane */
+            vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]);
+            vec3 vrel = v3_add(v3(g->vx[i], g->vy[i], g->vz[i]), v3_cross(wi, lever));
+            const dem_pair_coef *cf = &w->coef[g->mat[i]][wl->material];
+            double fn;
+            /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
+            vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
+            vec3 T = v3_add(v3_cross(lever, F), dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+            g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
+            g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
+            wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
+        }
+        g->wall_mask[i] = mask;
+    }
+    return contacts;
+}
+
 int dem_step_surface(dem_world *w, cm_error *err)
 {
     if (!w->prepared) {
@@ -702,8 +875,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
     double t0 = cm_now();
     dem_grains *g = &w->g;
     const int n = g->n, nt = w->n_threads, nw = w->n_walls;
-    const double dt = w->def.dt;
-    const vec3 grav = v3_load(w->def.gravity);
+    const int shaped = w->n_shaped > 0;
     int contacts = 0;
     for (int t = 0; t < nt; t++)
         memset(w->tb[t].wall_f, 0, sizeof w->tb[t].wall_f);
@@ -714,42 +886,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
         int tid = thread_id();
         int lo = (int)((long)n * tid / nt), hi = (int)((long)n * (tid + 1) / nt);
         double(*wf)[3] = w->tb[tid].wall_f;
-        for (int i = lo; i < hi; i++) {
-            double m = 1.0 / g->inv_m[i];
-            /* gravity, eq. 1 */
-            g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
-            g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
-            double r = g->r[i];
-            uint32_t mask = g->wall_mask[i];
-            for (int k = 0; k < nw; k++) {
-                const dem_wall *wl = &w->walls[k];
-                vec3 nrm = v3_load(wl->n);
-                double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
-                double delta = r - dist;
-                double *xi = g->wall_hist + ((size_t)i * nw + k) * 3;
-                if (delta <= 0.0) {
-                    if (mask & (1u << k)) {
-                        xi[0] = xi[1] = xi[2] = 0.0;
-                        mask &= ~(1u << k);
-                    }
-                    continue;
-                }
-                mask |= 1u << k;
-                contacts++;
-                vec3 lever = v3_scale(nrm, -dist); /* centre -> contact point on the plane */
-                vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]);
-                vec3 vrel = v3_add(v3(g->vx[i], g->vy[i], g->vz[i]), v3_cross(wi, lever));
-                const dem_pair_coef *cf = &w->coef[g->mat[i]][wl->material];
-                double fn;
-                /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
-                vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
-                vec3 T = v3_add(v3_cross(lever, F), dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
-                g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
-                g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
-                wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
-            }
-            g->wall_mask[i] = mask;
-        }
+        contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
     }
     for (int k = 0; k < nw; k++) {
         memset(w->walls[k].force, 0, sizeof w->walls[k].force);
@@ -767,7 +904,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
 
 /* Grain–grain contact of pair p (slots i < j); force and torques written to
  * the arrays f (6 blocks of cap: fx fy fz tx ty tz). Returns 1 in contact. */
-static inline int pair_contact(dem_world *w, int p, double *fx, double *fy, double *fz, double *tx, double *ty,
+static inline __attribute__((always_inline)) int pair_contact(dem_world *w, int p, double *fx, double *fy, double *fz, double *tx, double *ty,
                                double *tz)
 {
     dem_grains *g = &w->g;
@@ -830,6 +967,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
     double t0 = cm_now();
     int contacts = 0;
     const int np = w->n_pairs;
+    const int shaped = w->n_shaped > 0;
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
@@ -844,8 +982,18 @@ int dem_step_grains(dem_world *w, cm_error *err)
             memset(b, 0, 6 * (size_t)cap * sizeof *b);
             fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
         }
-        for (int p = lo; p < hi; p++)
-            contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
+        if (!shaped) /* spheres only: the original loop */
+            for (int p = lo; p < hi; p++)
+                contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
+        else
+            for (int p = lo; p < hi; p++) {
+                int i = w->pi[p], j = w->pj[p];
+                if ((g->shape[i] & g->shape[j]) < 0) /* both -1: spheres */
+                    contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
+                else
+                    contacts += dem_shaped_pair(w, i, j, w->hist_val[w->hist_cur] + 3 * (size_t)p, fx, fy, fz, tx,
+                                                ty, tz);
+            }
 #ifdef _OPENMP
 #pragma omp barrier
 #pragma omp for schedule(static)
@@ -869,6 +1017,11 @@ int dem_step_grains(dem_world *w, cm_error *err)
     double maxd2 = 0.0;
     int bad = n;
     const double half = 0.5 * w->skin;
+    double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
+    if (shaped)
+        for (int i = 0; i < n; i++)
+            if (g->shape[i] >= 0)
+                memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
 #ifdef _OPENMP
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(max : maxd2) reduction(min : bad)
 #endif
@@ -899,6 +1052,26 @@ int dem_step_grains(dem_world *w, cm_error *err)
             maxd2 = d2;
         if (!isfinite(d2) && i < bad)
             bad = i;
+    }
+    if (shaped) {
+        /* Shaped grains: the loop above moved them (translation is the same)
+         * but treated their rotation as a sphere's; redo it. Euler's
+         * equations (eq. 8) in the body frame, leapfrog in the world angular
+         * momentum, L(t+dt/2) = L(t-dt/2) + T(t) dt, then the free rotation
+         * with that L over dt from the saved orientation (NO_SQUISH,
+         * dem_shape.h); omega from L at the new orientation. */
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(nt) schedule(static)
+#endif
+        for (int i = 0; i < n; i++) {
+            if (g->shape[i] < 0)
+                continue;
+            double *L = g->angmom + 3 * i, *q = g->q + 4 * i, om[3];
+            memcpy(q, qsave + 4 * i, 4 * sizeof *q);
+            L[0] += g->tx[i] * dt, L[1] += g->ty[i] * dt, L[2] += g->tz[i] * dt;
+            dem_rotate_free(q, L, g->inertia + 3 * i, dt, om);
+            g->wx[i] = om[0], g->wy[i] = om[1], g->wz[i] = om[2];
+        }
     }
     w->step++;
     w->time += dt;
@@ -935,8 +1108,13 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     for (int i = 0; i < g->n; i++) {
         double m = 1.0 / g->inv_m[i], I = 1.0 / g->inv_i[i];
         s->ke_trans += 0.5 * m * (g->vx[i] * g->vx[i] + g->vy[i] * g->vy[i] + g->vz[i] * g->vz[i]);
-        s->ke_rot += 0.5 * I * (g->wx[i] * g->wx[i] + g->wy[i] * g->wy[i] + g->wz[i] * g->wz[i]);
         s->pe_grav -= m * (grav.x * g->x[i] + grav.y * g->y[i] + grav.z * g->z[i]);
+        if (g->shape[i] >= 0) { /* 1/2 omega.L; the elastic energy of shaped contacts is not summed */
+            const double *L = g->angmom + 3 * i;
+            s->ke_rot += 0.5 * (g->wx[i] * L[0] + g->wy[i] * L[1] + g->wz[i] * L[2]);
+            continue;
+        }
+        s->ke_rot += 0.5 * I * (g->wx[i] * g->wx[i] + g->wy[i] * g->wy[i] + g->wz[i] * g->wz[i]);
         for (int k = 0; k < w->n_walls; k++) {
             const dem_wall *wl = &w->walls[k];
             double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] + (g->z[i] - wl->p[2]) * wl->n[2];
@@ -949,6 +1127,8 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     }
     for (int p = 0; p < w->n_pairs; p++) {
         int i = w->pi[p], j = w->pj[p];
+        if ((g->shape[i] & g->shape[j]) >= 0)
+            continue;
         double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
         double d = sqrt(ex * ex + ey * ey + ez * ez), delta = g->r[i] + g->r[j] - d;
         if (delta > 0.0) {
@@ -971,7 +1151,10 @@ void dem_grain_contact_counts(const dem_world *w, int *out)
         for (int k = 0; k < w->n_walls; k++) {
             const dem_wall *wl = &w->walls[k];
             double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] + (g->z[i] - wl->p[2]) * wl->n[2];
-            c += dist < g->r[i];
+            if (g->shape[i] >= 0 && dist < g->r[i])
+                c += dem_shaped_plane_depth(w, i, wl->p, wl->n) > 0.0;
+            else
+                c += dist < g->r[i];
         }
         out[g->id[i]] = c;
     }
@@ -979,7 +1162,8 @@ void dem_grain_contact_counts(const dem_world *w, int *out)
         int i = w->pi[p], j = w->pj[p];
         double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
         double rs = g->r[i] + g->r[j];
-        if (ex * ex + ey * ey + ez * ez < rs * rs) {
+        if ((g->shape[i] & g->shape[j]) < 0 ? ex * ex + ey * ey + ez * ez < rs * rs
+                                               : dem_shaped_pair_touch(w, i, j)) {
             out[g->id[i]]++;
             out[g->id[j]]++;
         }

@@ -8,6 +8,7 @@
 #include "dem.h"
 #include "dem_contact.h"
 #include "dem_hash.h"
+#include "dem_shape.h"
 #include "dem_surface.h"
 
 _Static_assert(DEM_MAX_WALLS <= 32, "dem_grains.wall_mask holds one bit per wall");
@@ -37,6 +38,11 @@ typedef struct dem_grains {
     double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
     uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
     int *surf_count;   /* surface contacts of the grain in the last step */
+    /* non-spherical grains (cold; spheres: shape -1, sc 1) */
+    int *shape;        /* shape id, -1 = sphere (the fast path) */
+    double *sc;        /* length scale of the shape */
+    double *inertia;   /* 3 per grain: principal moments, kg m^2 */
+    double *angmom;    /* 3 per grain: angular momentum, world frame, kg m^2/s (shaped grains only) */
 } dem_grains;
 
 /* Per-thread force buffers (thread 0 writes the grain arrays directly). */
@@ -73,6 +79,10 @@ struct dem_world {
 
     dem_surface *surf;
 
+    dem_shape *shapes;  /* DEM_MAX_SHAPES, allocated by the first dem_shape_add */
+    int n_shapes;
+    int n_shaped;       /* shaped grains in the world; 0 = every loop takes the sphere path */
+
     int n_threads;
     dem_thread_buf *tb; /* n_threads entries */
     double *scratch;    /* DEM_SCRATCH_PER_GRAIN * cap: re-sorting without allocation */
@@ -90,6 +100,8 @@ struct dem_world {
 #define DEM_SCRATCH_PER_GRAIN                                                                         \
     (DEM_MAX_WALLS * 3 > DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE ? DEM_MAX_WALLS * 3                      \
                                                              : DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE)
+
+_Static_assert(DEM_SCRATCH_PER_GRAIN >= 4, "scratch holds the saved quaternions of shaped grains");
 
 int dem_world_prepare(dem_world *w, cm_error *err);
 void dem_grains_permute(dem_world *w, const int *order);

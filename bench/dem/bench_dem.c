@@ -7,6 +7,14 @@
  *                                       velocity in [-0.5, 0.5] m/s per axis, so
  *                                       the neighbour list is rebuilt often),
  *                                       print "grain_steps_per_s <value>"
+ *   bench_dem shapes WORK_DIR THREADS STEPS [N]
+ *                                       settled bed of N (default 1500) random
+ *                                       angular grains (12 vertices, elongation
+ *                                       1.4, 16 variants) and the same bed of
+ *                                       spheres (same volume-equivalent radii,
+ *                                       box 0.1 x 0.1 m), both cached in
+ *                                       WORK_DIR; time STEPS steps of each in
+ *                                       one run, print both rates and the ratio
  * Materials and step are fixed here and in in.bench (keep them equal):
  * radius 3.2775–3.6225 mm, density 2600 kg/m3, E 5e7 Pa, ν 0.3, e 0.5,
  * μ 0.6, dt 1e-5 s, box 0.2 x 0.2 m with floor and four side walls. */
@@ -100,6 +108,80 @@ static int write_liggghts_data(const dem_world *w, const char *path, int stirred
     return CM_OK;
 }
 
+/* Settling progress on stderr every 0.05 s of simulated time. */
+static int settle_progress(dem_world *w, void *user)
+{
+    double *next = user;
+    dem_stats s;
+    dem_world_stats(w, &s);
+    if (s.time >= *next) {
+        fprintf(stderr, "settling: t = %.3f s, KE/grain = %.3g J, contacts %d\n", s.time,
+                (s.ke_trans + s.ke_rot) / (s.grains ? s.grains : 1), s.contacts_gg + s.contacts_gw);
+        *next += 0.05;
+    }
+    return 0;
+}
+
+/* Settled bed of n grains of one kind (0 spheres, 1 angular) for the
+ * shapes comparison; cached in dir. */
+static int make_shapes_world(int threads, const char *dir, int n, int angular, dem_world **w, cm_error *err)
+{
+    dem_world_def d = dem_world_def_default();
+    d.dt = 1e-5;
+    d.max_grains = n;
+    d.threads = threads;
+    int rc = dem_world_create(&d, 1, &SOIL, w, err);
+    if (rc)
+        return rc;
+    dem_bed_params p = bed_params(dir);
+    p.box_max[0] = p.box_max[1] = 0.1;
+    p.layers[0].count = n;
+    p.settle_ke = 1e-7; /* J per grain, the scenes' default */
+    p.settle_min_time = 0.2;
+    if (angular) {
+        p.layers[0].shape.type = DEM_SHAPE_POLYHEDRON;
+        p.layers[0].shape.elongation = 1.4;
+        p.layers[0].shape.random_verts = 12;
+        p.layers[0].shape.variants = 16;
+    }
+    snprintf(p.file, sizeof p.file, "%s/bed_shapes_%s_%d.h5", dir, angular ? "angular" : "spheres", n);
+    bool loaded;
+    double next = 0.05;
+    return dem_bed_build(*w, &p, settle_progress, &next, &loaded, err);
+}
+
+static int run_shapes(const char *dir, int threads, int steps, int n, cm_error *err)
+{
+    double rate[2] = {0, 0};
+    for (int kind = 0; kind < 2; kind++) {
+        dem_world *w = NULL;
+        int rc = make_shapes_world(threads, dir, n, kind, &w, err);
+        for (int k = 0; k < 200 && rc == CM_OK; k++)
+            rc = dem_step(w, err);
+        double t0 = cm_now();
+        for (int k = 0; k < steps && rc == CM_OK; k++)
+            rc = dem_step(w, err);
+        double t = cm_now() - t0;
+        if (rc == CM_OK) {
+            dem_stats s;
+            dem_world_stats(w, &s);
+            rate[kind] = (double)dem_grain_count(w) * steps / t;
+            printf("%s: threads %d grains %d steps %d wall_s %.4f contacts %d (grain-grain %d) rebuilds %ld bed height "
+                   "%.4f m\n",
+                   kind ? "angular" : "spheres", threads, dem_grain_count(w), steps, t, s.contacts_gg + s.contacts_gw,
+                   s.contacts_gg, s.profile.rebuilds, dem_bed_height(w));
+            printf("profile: broad %.3f s narrow %.3f s exchange %.3f s integrate %.3f s\n", s.profile.broad,
+                   s.profile.narrow, s.profile.exchange, s.profile.integrate);
+            printf("%s_grain_steps_per_s %.6g\n", kind ? "angular" : "spheres", rate[kind]);
+        }
+        dem_world_destroy(&w);
+        if (rc)
+            return rc;
+    }
+    printf("ratio_angular_over_spheres %.4f\n", rate[1] / rate[0]);
+    return CM_OK;
+}
+
 int main(int argc, char **argv)
 {
     cm_log_set_tag("bench_dem");
@@ -143,8 +225,12 @@ int main(int argc, char **argv)
                    s.profile.narrow, s.profile.exchange, s.profile.integrate);
             printf("grain_steps_per_s %.6g\n", (double)dem_grain_count(w) * steps / t);
         }
+    } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "shapes") == 0) {
+        rc = run_shapes(argv[2], atoi(argv[3]), atoi(argv[4]), argc == 6 ? atoi(argv[5]) : 1500, &err);
     } else {
-        fprintf(stderr, "usage: %s prepare WORK_DIR | run WORK_DIR THREADS STEPS [stirred]\n", argv[0]);
+        fprintf(stderr, "usage: %s prepare WORK_DIR | run WORK_DIR THREADS STEPS [stirred] | shapes WORK_DIR THREADS "
+                        "STEPS [N]\n",
+                argv[0]);
         return 2;
     }
     if (rc)

@@ -252,6 +252,71 @@ static int cand_feature(const dem_surface *s, const cand *c, int nodes[2])
     }
 }
 
+/* Walks the BVH for the triangles whose closest point to p lies within r,
+ * in a fixed order (depth first, left child first, leaf order), for both the
+ * sphere and the shaped contact paths. A traversal stack deeper than 64
+ * sets *overflow. */
+typedef struct near_iter {
+    const dem_surface *s;
+    double p[3], lo[3], hi[3], r2;
+    int stack[64], sp;
+    const dem_bvh_node *leaf; /* leaf being read, NULL between leaves */
+    int k;                    /* next triangle of the leaf */
+    int *overflow;
+} near_iter;
+
+static inline void near_begin(near_iter *it, const dem_surface *s, vec3 c, double r, int *overflow)
+{
+    it->s = s;
+    it->p[0] = c.x, it->p[1] = c.y, it->p[2] = c.z;
+    it->lo[0] = c.x - r, it->lo[1] = c.y - r, it->lo[2] = c.z - r;
+    it->hi[0] = c.x + r, it->hi[1] = c.y + r, it->hi[2] = c.z + r;
+    it->r2 = r * r;
+    it->sp = 0;
+    it->stack[it->sp++] = 0;
+    it->leaf = NULL;
+    it->k = 0;
+    it->overflow = overflow;
+}
+
+/* The next triangle t within r: its region, barycentric weights and closest
+ * point cp, and the squared distance d2. Returns 0 when there is none left. */
+static inline int near_next(near_iter *it, int *t, int *region, double bary[3], double cp[3], double *d2)
+{
+    const dem_surface *s = it->s;
+    for (;;) {
+        if (it->leaf && it->k < it->leaf->count) {
+            int tt = s->perm[it->leaf->first + it->k++];
+            const int *tn = s->tri + 3 * tt;
+            int reg = dem_closest_on_triangle(it->p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
+            double dx = it->p[0] - cp[0], dy = it->p[1] - cp[1], dz = it->p[2] - cp[2];
+            double dd = dx * dx + dy * dy + dz * dz;
+            if (dd >= it->r2)
+                continue;
+            *t = tt, *region = reg, *d2 = dd;
+            return 1;
+        }
+        it->leaf = NULL;
+        if (it->sp == 0)
+            return 0;
+        const dem_bvh_node *nd = &s->bvh[it->stack[--it->sp]];
+        if (nd->lo[0] > it->hi[0] || nd->hi[0] < it->lo[0] || nd->lo[1] > it->hi[1] || nd->hi[1] < it->lo[1] ||
+            nd->lo[2] > it->hi[2] || nd->hi[2] < it->lo[2])
+            continue;
+        if (nd->right >= 0) {
+            if (it->sp + 2 > 64) {
+                *it->overflow = 1;
+                continue;
+            }
+            it->stack[it->sp++] = nd->right;
+            it->stack[it->sp++] = (int)(nd - s->bvh) + 1;
+            continue;
+        }
+        it->leaf = nd;
+        it->k = 0;
+    }
+}
+
 /* Contacts of one grain (slot i) with the surface; returns the number kept.
  * De-duplication: the contact points that count are the local minima of the
  * distance from the grain centre to the whole surface. A face point always is
@@ -263,41 +328,17 @@ static int cand_feature(const dem_surface *s, const cand *c, int nodes[2])
  * one contact wherever it sits. */
 static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, int *overflow)
 {
-    int n = 0, stack[64], sp = 0;
-    double lo[3] = {c.x - r, c.y - r, c.z - r}, hi[3] = {c.x + r, c.y + r, c.z + r};
-    stack[sp++] = 0;
-    double p[3] = {c.x, c.y, c.z};
-    while (sp > 0) {
-        const dem_bvh_node *nd = &s->bvh[stack[--sp]];
-        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] ||
-            nd->lo[2] > hi[2] || nd->hi[2] < lo[2])
-            continue;
-        if (nd->right >= 0) {
-            if (sp + 2 > 64) {
-                *overflow = 1;
-                continue;
-            }
-            stack[sp++] = nd->right;
-            stack[sp++] = (int)(nd - s->bvh) + 1;
+    int n = 0;
+    near_iter it;
+    near_begin(&it, s, c, r, overflow);
+    cand q;
+    while (near_next(&it, &q.tri, &q.region, q.bary, q.p, &q.d2)) {
+        if (n == DEM_SURF_MAX_CAND) {
+            *overflow = 1;
             continue;
         }
-        for (int k = 0; k < nd->count; k++) {
-            int t = s->perm[nd->first + k];
-            const int *tn = s->tri + 3 * t;
-            cand q;
-            q.region = dem_closest_on_triangle(p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], q.bary, q.p);
-            double dx = p[0] - q.p[0], dy = p[1] - q.p[1], dz = p[2] - q.p[2];
-            q.d2 = dx * dx + dy * dy + dz * dz;
-            if (q.d2 >= r * r)
-                continue;
-            if (n == DEM_SURF_MAX_CAND) {
-                *overflow = 1;
-                continue;
-            }
-            q.tri = t;
-            q.keep = 1;
-            cd[n++] = q;
-        }
+        q.keep = 1;
+        cd[n++] = q;
     }
     /* drop edge/vertex points that are not local minima */
     double tol = 1e-12 * r * r;
@@ -361,63 +402,44 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *
                              double *rc, int *overflow)
 {
     const dem_surface *s = w->surf;
-    int n = 0, stack[64], sp = 0;
-    double lo[3] = {c.x - r, c.y - r, c.z - r}, hi[3] = {c.x + r, c.y + r, c.z + r};
+    int n = 0;
     double p[3] = {c.x, c.y, c.z}, inv_l = 1.0 / r, zero[3] = {0, 0, 0};
     double pu[DEM_SURF_MAX_CAND][3]; /* contact points before clamping to their triangle */
     dem_body gb;
     dem_grain_body(w, i, p, inv_l, &gb);
-    stack[sp++] = 0;
-    while (sp > 0) {
-        const dem_bvh_node *nd = &s->bvh[stack[--sp]];
-        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] ||
-            nd->lo[2] > hi[2] || nd->hi[2] < lo[2])
-            continue;
-        if (nd->right >= 0) {
-            if (sp + 2 > 64) {
-                *overflow = 1;
-                continue;
-            }
-            stack[sp++] = nd->right;
-            stack[sp++] = (int)(nd - s->bvh) + 1;
-            continue;
-        }
-        for (int k = 0; k < nd->count; k++) {
-            int t = s->perm[nd->first + k];
-            const int *tn = s->tri + 3 * t;
-            double bary[3], cp[3];
-            dem_closest_on_triangle(p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
-            double dx = p[0] - cp[0], dy = p[1] - cp[1], dz = p[2] - cp[2];
-            if (dx * dx + dy * dy + dz * dz >= r * r)
-                continue;
-            double v[3][3];
-            for (int a = 0; a < 3; a++)
-                for (int b = 0; b < 3; b++)
-                    v[a][b] = (s->x[3 * tn[a] + b] - p[b]) * inv_l;
-            dem_body tb;
-            dem_body_triangle(v[0], v[1], v[2], zero, &tb);
-            double dep, nn[3], pc[3];
-            if (dem_body_penetration(&tb, &gb, 0, &dep, nn, pc) != 1)
-                continue;
-            if (n == DEM_SURF_MAX_CAND) {
-                *overflow = 1;
-                continue;
-            }
-            double mn[3] = {-nn[0], -nn[1], -nn[2]}, deep[3];
-            dem_body_contact_point(&gb, nn, dep, 1.0, deep);
+    near_iter it;
+    near_begin(&it, s, c, r, overflow);
+    int tri_id, region;
+    double bary_c[3], cp_c[3], d2;
+    while (near_next(&it, &tri_id, &region, bary_c, cp_c, &d2)) {
+        const int *tn = s->tri + 3 * tri_id;
+        double v[3][3];
+        for (int a = 0; a < 3; a++)
             for (int b = 0; b < 3; b++)
-                deep[b] = p[b] + deep[b] * r;
-            memcpy(pu[n], deep, sizeof deep);
-            cand q;
-            q.region = dem_closest_on_triangle(deep, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], q.bary, q.p);
-            q.tri = t;
-            q.d2 = -dep; /* sorts deepest first */
-            q.keep = 1;
-            memcpy(nr[n], nn, sizeof nn);
-            depth[n] = dep * r;
-            rc[n] = dem_shape_contact_radius(gb.s, w->g.sc[i], gb.R, mn);
-            cd[n++] = q;
+                v[a][b] = (s->x[3 * tn[a] + b] - p[b]) * inv_l;
+        dem_body tb;
+        dem_body_triangle(v[0], v[1], v[2], zero, &tb);
+        double dep, nn[3], pc[3];
+        if (dem_body_penetration(&tb, &gb, 0, &dep, nn, pc) != 1)
+            continue;
+        if (n == DEM_SURF_MAX_CAND) {
+            *overflow = 1;
+            continue;
         }
+        double mn[3] = {-nn[0], -nn[1], -nn[2]}, deep[3];
+        dem_body_contact_point(&gb, nn, dep, 1.0, deep);
+        for (int b = 0; b < 3; b++)
+            deep[b] = p[b] + deep[b] * r;
+        memcpy(pu[n], deep, sizeof deep);
+        cand q;
+        q.region = dem_closest_on_triangle(deep, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], q.bary, q.p);
+        q.tri = tri_id;
+        q.d2 = -dep; /* sorts deepest first */
+        q.keep = 1;
+        memcpy(nr[n], nn, sizeof nn);
+        depth[n] = dep * r;
+        rc[n] = dem_shape_contact_radius(gb.s, w->g.sc[i], gb.R, mn);
+        cd[n++] = q;
     }
     /* as for spheres: a contact whose point lies on an edge or vertex is
      * dropped when a triangle sharing that feature has a deeper contact (the

@@ -112,6 +112,19 @@ int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double
     return fem_solver_constrain(s, s->fixed, NULL, err);
 }
 
+/* What depends on the constraints: the free-dof stiffness, the factors and
+ * the solve workspaces (rebuilt by fem_solver_constrain and _prepare). */
+static void free_constrained(fem_solver *s)
+{
+    cholmod_free_sparse(&s->Kff, &s->cc);
+    cholmod_free_factor(&s->L, &s->cc);
+    cholmod_free_factor(&s->Leff, &s->cc);
+    cholmod_free_dense(&s->rhs, &s->cc);
+    cholmod_free_dense(&s->sol, &s->cc);
+    cholmod_free_dense(&s->Y, &s->cc);
+    cholmod_free_dense(&s->E, &s->cc);
+}
+
 void fem_solver_destroy(fem_solver **ps)
 {
     fem_solver *s = *ps;
@@ -119,13 +132,7 @@ void fem_solver_destroy(fem_solver **ps)
         return;
     if (s->cc_started) {
         cholmod_free_sparse(&s->K, &s->cc);
-        cholmod_free_sparse(&s->Kff, &s->cc);
-        cholmod_free_factor(&s->L, &s->cc);
-        cholmod_free_factor(&s->Leff, &s->cc);
-        cholmod_free_dense(&s->rhs, &s->cc);
-        cholmod_free_dense(&s->sol, &s->cc);
-        cholmod_free_dense(&s->Y, &s->cc);
-        cholmod_free_dense(&s->E, &s->cc);
+        free_constrained(s);
         cholmod_finish(&s->cc);
     }
     free(s->mass);
@@ -155,13 +162,7 @@ int fem_solver_constrain(fem_solver *s, const uint8_t *fixed, const double *valu
         if (!s->fixed[d])
             s->free_dofs[s->n_free++] = d;
     }
-    cholmod_free_sparse(&s->Kff, &s->cc);
-    cholmod_free_factor(&s->L, &s->cc);
-    cholmod_free_factor(&s->Leff, &s->cc);
-    cholmod_free_dense(&s->rhs, &s->cc);
-    cholmod_free_dense(&s->sol, &s->cc);
-    cholmod_free_dense(&s->Y, &s->cc);
-    cholmod_free_dense(&s->E, &s->cc);
+    free_constrained(s);
     s->h_eff = 0.0;
     if (s->n_free == 0)
         return cm_fail(err, CM_ERR_STATE, "fem solver: every dof is fixed");

@@ -229,6 +229,8 @@ typedef struct dem_stats {
 } dem_stats;
 
 void dem_world_stats(const dem_world *w, dem_stats *s);
+/* Steps taken so far (cheap; dem_world_stats sums over every grain and pair). */
+long dem_world_steps(const dem_world *w);
 /* Total force on wall k from the last step (the grains push it), N. */
 int dem_wall_force(const dem_world *w, int k, double f[3]);
 /* Contacts per grain (by id), out has dem_grain_count entries. */

@@ -1097,6 +1097,8 @@ int dem_step(dem_world *w, cm_error *err)
 
 /* ---- diagnostics ------------------------------------------------------- */
 
+long dem_world_steps(const dem_world *w) { return w->step; }
+
 void dem_world_stats(const dem_world *w, dem_stats *s)
 {
     const dem_grains *g = &w->g;

@@ -7,6 +7,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The --set overrides of this process (cm_scene_add_override). */
+static const char *g_overrides[CM_SCENE_MAX_OVERRIDES];
+static int g_n_overrides;
+
 struct cm_scene {
     config_t cfg;
     char path[1024];
@@ -60,7 +64,15 @@ int cm_scene_open(const char *path, cm_scene **out, cm_error *err)
         free(s);
         return CM_ERR_PARSE;
     }
-    return open_common(s, path, out);
+    open_common(s, path, out);
+    for (int i = 0; i < g_n_overrides; i++) {
+        int rc = cm_scene_set(s, g_overrides[i], err);
+        if (rc) {
+            cm_scene_close(out);
+            return rc;
+        }
+    }
+    return CM_OK;
 }
 
 int cm_scene_open_string(const char *text, const char *name, cm_scene **out, cm_error *err)
@@ -392,3 +404,176 @@ int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *e
     }
     return CM_OK;
 }
+
+/* ---- overrides (--set key=value) ------------------------------------------ */
+
+/* Deep copy of src as a new child `name` of parent (name NULL inside lists
+ * and arrays). */
+static config_setting_t *copy_setting(config_setting_t *parent, const char *name, const config_setting_t *src)
+{
+    int type = config_setting_type(src);
+    config_setting_t *d = config_setting_add(parent, name, type);
+    if (!d)
+        return NULL;
+    int ok = CONFIG_TRUE;
+    switch (type) {
+    case CONFIG_TYPE_INT: ok = config_setting_set_int(d, config_setting_get_int(src)); break;
+    case CONFIG_TYPE_INT64: ok = config_setting_set_int64(d, config_setting_get_int64(src)); break;
+    case CONFIG_TYPE_FLOAT: ok = config_setting_set_float(d, config_setting_get_float(src)); break;
+    case CONFIG_TYPE_BOOL: ok = config_setting_set_bool(d, config_setting_get_bool(src)); break;
+    case CONFIG_TYPE_STRING: ok = config_setting_set_string(d, config_setting_get_string(src)); break;
+    default:
+        for (int i = 0; i < config_setting_length(src); i++) {
+            const config_setting_t *el = config_setting_get_elem(src, (unsigned)i);
+            if (!copy_setting(d, config_setting_name(el), el))
+                return NULL;
+        }
+    }
+    return ok == CONFIG_TRUE ? d : NULL;
+}
+
+static bool is_number_type(int t)
+{
+    return t == CONFIG_TYPE_INT || t == CONFIG_TYPE_INT64 || t == CONFIG_TYPE_FLOAT;
+}
+
+static double number_of(const config_setting_t *st)
+{
+    switch (config_setting_type(st)) {
+    case CONFIG_TYPE_INT: return config_setting_get_int(st);
+    case CONFIG_TYPE_INT64: return (double)config_setting_get_int64(st);
+    default: return config_setting_get_float(st);
+    }
+}
+
+/* The parent group of `key` (all but its last component), created as groups
+ * where missing; *last points at the last component within key. */
+static config_setting_t *parent_for(cm_scene *s, const char *key, const char **last, const char *assignment,
+                                    cm_error *err)
+{
+    const char *dot = strrchr(key, '.');
+    *last = dot ? dot + 1 : key;
+    if (!dot)
+        return config_root_setting(&s->cfg);
+    char path[512];
+    snprintf(path, sizeof path, "%.*s", (int)(dot - key), key);
+    config_setting_t *p = config_lookup(&s->cfg, path);
+    if (p)
+        return p;
+    const char *ignored;
+    config_setting_t *grand = parent_for(s, path, &ignored, assignment, err);
+    if (!grand)
+        return NULL;
+    if (!config_setting_is_group(grand) || ignored[0] == '[') {
+        cm_fail(err, CM_ERR_KEY, "%s: --set %s: '%s' is not in the scene and cannot be created there", s->path,
+                assignment, path);
+        return NULL;
+    }
+    p = config_setting_add(grand, ignored, CONFIG_TYPE_GROUP);
+    if (!p)
+        cm_fail(err, CM_ERR_KEY, "%s: --set %s: cannot create group '%s'", s->path, assignment, path);
+    return p;
+}
+
+int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err)
+{
+    const char *eq = strchr(assignment, '=');
+    char key[512], value[1024];
+    if (!eq || eq == assignment)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE, e.g. --set coupling.dt=2e-5", assignment);
+    /* Trimmed key and value. */
+    const char *k0 = assignment, *k1 = eq, *v0 = eq + 1, *v1 = assignment + strlen(assignment);
+    while (k0 < k1 && (*k0 == ' ' || *k0 == '\t'))
+        k0++;
+    while (k1 > k0 && (k1[-1] == ' ' || k1[-1] == '\t'))
+        k1--;
+    while (v0 < v1 && (*v0 == ' ' || *v0 == '\t'))
+        v0++;
+    while (v1 > v0 && (v1[-1] == ' ' || v1[-1] == '\t' || v1[-1] == ';'))
+        v1--;
+    if (k1 == k0 || (size_t)(k1 - k0) >= sizeof key || v1 == v0 || (size_t)(v1 - v0) >= sizeof value - 8)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE with a non-empty key and value", assignment);
+    snprintf(key, sizeof key, "%.*s", (int)(k1 - k0), k0);
+    snprintf(value, sizeof value, "%.*s", (int)(v1 - v0), v0);
+
+    /* The value in libconfig syntax, as one setting `v`; a bare word that
+     * does not parse is taken as a string. */
+    config_t tmp;
+    config_init(&tmp);
+    char text[1100];
+    snprintf(text, sizeof text, "v = %s;", value);
+    const config_setting_t *src = NULL;
+    if (config_read_string(&tmp, text) && config_setting_length(config_root_setting(&tmp)) == 1)
+        src = config_lookup(&tmp, "v");
+    bool bare = src == NULL;
+    if (bare && strpbrk(value, "\"=;{}()[],#") != NULL) {
+        config_destroy(&tmp);
+        return cm_fail(err, CM_ERR_PARSE, "%s: --set %s: the value is not valid libconfig syntax", s->path,
+                       assignment);
+    }
+
+    int rc = CM_OK;
+    config_setting_t *st = config_lookup(&s->cfg, key);
+    int et = st ? config_setting_type(st) : CONFIG_TYPE_NONE;
+    int vt = src ? config_setting_type(src) : CONFIG_TYPE_STRING;
+    const char *last = "";
+    config_setting_t *parent = st ? config_setting_parent(st) : NULL;
+    bool in_array = parent && !config_setting_is_group(parent);
+    int ok = CONFIG_TRUE;
+    if (st && et == CONFIG_TYPE_STRING && (bare || vt != CONFIG_TYPE_GROUP)) {
+        /* A string key takes the text as written (name=run3, name=42). */
+        ok = config_setting_set_string(st, src && vt == CONFIG_TYPE_STRING ? config_setting_get_string(src) : value);
+    } else if (st && et == CONFIG_TYPE_FLOAT && is_number_type(vt)) {
+        ok = config_setting_set_float(st, number_of(src));
+    } else if (st && (et == CONFIG_TYPE_INT || et == CONFIG_TYPE_INT64) && (vt == CONFIG_TYPE_INT || vt == CONFIG_TYPE_INT64)) {
+        ok = et == CONFIG_TYPE_INT && vt == CONFIG_TYPE_INT ? config_setting_set_int(st, config_setting_get_int(src))
+                                                             : config_setting_set_int64(st, config_setting_get_int64(src));
+    } else if (st && et == CONFIG_TYPE_BOOL && vt == CONFIG_TYPE_BOOL) {
+        ok = config_setting_set_bool(st, config_setting_get_bool(src));
+    } else if (st && in_array) {
+        if (bare || !is_number_type(vt) || !is_number_type(et))
+            rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: an element of '%.*s' can only be given a number", s->path,
+                         assignment, (int)(strrchr(key, '.') ? strrchr(key, '.') - key : 0), key);
+        else
+            ok = et == CONFIG_TYPE_FLOAT ? config_setting_set_float(st, number_of(src))
+                                         : config_setting_set_int64(st, (long long)number_of(src));
+    } else {
+        /* Missing, or a value of another kind (an array for a group, a float
+         * for an int): the value's own type, judged by the reader. */
+        char name[256];
+        if (st) {
+            snprintf(name, sizeof name, "%s", config_setting_name(st));
+            config_setting_remove(parent, name);
+        } else if ((parent = parent_for(s, key, &last, assignment, err)) != NULL) {
+            snprintf(name, sizeof name, "%s", last);
+        } else {
+            rc = err ? err->code : CM_ERR_KEY;
+        }
+        if (!rc && (name[0] == '[' || !config_setting_is_group(parent)))
+            rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: '%s' is not in the scene and cannot be created", s->path,
+                         assignment, key);
+        if (!rc && bare) {
+            config_setting_t *d = config_setting_add(parent, name, CONFIG_TYPE_STRING);
+            ok = d && config_setting_set_string(d, value);
+        } else if (!rc) {
+            ok = copy_setting(parent, name, src) != NULL;
+        }
+    }
+    config_destroy(&tmp);
+    if (!rc && ok != CONFIG_TRUE)
+        rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: cannot set '%s' to that value", s->path, assignment, key);
+    return rc;
+}
+
+int cm_scene_add_override(const char *assignment, cm_error *err)
+{
+    const char *eq = strchr(assignment, '=');
+    if (!eq || eq == assignment)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE, e.g. --set coupling.dt=2e-5", assignment);
+    if (g_n_overrides >= CM_SCENE_MAX_OVERRIDES)
+        return cm_fail(err, CM_ERR_RANGE, "--set %s: more than %d overrides", assignment, CM_SCENE_MAX_OVERRIDES);
+    g_overrides[g_n_overrides++] = assignment;
+    return CM_OK;
+}
+
+void cm_scene_clear_overrides(void) { g_n_overrides = 0; }

@@ -392,11 +392,12 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR]\n"
+    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
-                    "  with the physical groups rim, cavity and contact, and exits.\n");
+                    "  with the physical groups rim, cavity and contact, and exits.\n"
+                    "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n");
     return 2;
 }
 
@@ -413,7 +414,13 @@ int main(int argc, char **argv)
             o.out = argv[++i];
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
             o.export_mesh = argv[++i];
-        else
+        else if (strcmp(argv[i], "--set") == 0 && i + 1 < argc) {
+            cm_error err = {0};
+            if (cm_scene_add_override(argv[++i], &err)) {
+                fprintf(stderr, "fem_server: %s\n", err.msg);
+                return 2;
+            }
+        } else
             return usage();
     }
     if (!o.scene || (!o.shm && !o.export_mesh))

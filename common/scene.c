@@ -15,6 +15,7 @@ struct cm_scene {
     config_t cfg;
     char path[1024];
     char dir[1024];
+    char where[1100]; /* message buffer of where() */
 };
 
 /* A setting counts as read when its hook points at this marker. */
@@ -29,6 +30,17 @@ static void mark_known(config_setting_t *st)
 static int line_of(const config_setting_t *st)
 {
     return st ? (int)config_setting_source_line(st) : 0;
+}
+
+/* "file:line" of a setting, or "file (--set)" for one an override created. */
+static const char *where(cm_scene *s, const config_setting_t *st)
+{
+    int line = line_of(st);
+    if (line > 0)
+        snprintf(s->where, sizeof s->where, "%s:%d", s->path, line);
+    else
+        snprintf(s->where, sizeof s->where, "%s (--set)", s->path);
+    return s->where;
 }
 
 static int open_common(cm_scene *s, const char *name, cm_scene **out)
@@ -139,10 +151,10 @@ static int as_double(cm_scene *s, const config_setting_t *st, const char *path, 
     case CONFIG_TYPE_INT: *out = (double)config_setting_get_int(st); break;
     case CONFIG_TYPE_INT64: *out = (double)config_setting_get_int64(st); break;
     default:
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be a number", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be a number", where(s, st), path);
     }
     if (!isfinite(*out))
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' is not a finite number", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' is not a finite number", where(s, st), path);
     return CM_OK;
 }
 
@@ -150,8 +162,7 @@ static int check_range(cm_scene *s, const config_setting_t *st, const char *path
                        cm_error *err)
 {
     if (v < lo || v > hi)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = %g is outside the allowed range [%g, %g]", s->path,
-                       line_of(st), path, v, lo, hi);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = %g is outside the allowed range [%g, %g]", where(s, st), path, v, lo, hi);
     return CM_OK;
 }
 
@@ -192,11 +203,11 @@ int cm_scene_int(cm_scene *s, const char *path, long lo, long hi, long *out, cm_
     case CONFIG_TYPE_INT: v = config_setting_get_int(st); break;
     case CONFIG_TYPE_INT64: v = config_setting_get_int64(st); break;
     default:
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be an integer", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be an integer", where(s, st), path);
     }
     if (v < lo || v > hi)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = %lld is outside the allowed range [%ld, %ld]",
-                       s->path, line_of(st), path, v, lo, hi);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = %lld is outside the allowed range [%ld, %ld]",
+                       where(s, st), path, v, lo, hi);
     *out = (long)v;
     return CM_OK;
 }
@@ -219,7 +230,7 @@ int cm_scene_bool_opt(cm_scene *s, const char *path, bool def, bool *out, cm_err
     }
     mark_known(st);
     if (config_setting_type(st) != CONFIG_TYPE_BOOL)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be true or false", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be true or false", where(s, st), path);
     *out = config_setting_get_bool(st) != 0;
     return CM_OK;
 }
@@ -231,11 +242,11 @@ int cm_scene_string(cm_scene *s, const char *path, char *buf, size_t len, cm_err
         return missing(s, path, err);
     mark_known(st);
     if (config_setting_type(st) != CONFIG_TYPE_STRING)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be a string in double quotes", s->path, line_of(st),
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be a string in double quotes", where(s, st),
                        path);
     const char *v = config_setting_get_string(st);
     if (strlen(v) >= len)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' is longer than %zu characters", s->path, line_of(st),
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' is longer than %zu characters", where(s, st),
                        path, len - 1);
     memcpy(buf, v, strlen(v) + 1);
     return CM_OK;
@@ -260,8 +271,7 @@ int cm_scene_doubles(cm_scene *s, const char *path, int n, double lo, double hi,
     mark_known(st);
     int type = config_setting_type(st);
     if ((type != CONFIG_TYPE_ARRAY && type != CONFIG_TYPE_LIST) || config_setting_length(st) != n)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be an array of %d numbers, e.g. [%s]", s->path,
-                       line_of(st), path, n, n == 3 ? "0.0, 0.0, -9.81" : "...");
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be an array of %d numbers, e.g. [%s]", where(s, st), path, n, n == 3 ? "0.0, 0.0, -9.81" : "...");
     for (int i = 0; i < n; i++) {
         config_setting_t *el = config_setting_get_elem(st, (unsigned)i);
         char elpath[600];
@@ -303,7 +313,7 @@ int cm_scene_choice(cm_scene *s, const char *path, const char *const *choices, i
         snprintf(list + used, sizeof list - used, "%s\"%s\"", i ? ", " : "", choices[i]);
     }
     config_setting_t *st = config_lookup(&s->cfg, path);
-    return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = \"%s\" is not one of %s", s->path, line_of(st), path, word,
+    return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = \"%s\" is not one of %s", where(s, st), path, word,
                    list);
 }
 
@@ -369,8 +379,7 @@ static int find_unread(cm_scene *s, config_setting_t *st, cm_error *err)
     if (config_setting_get_hook(st) != &g_known_marker && (!aggregate || config_setting_length(st) == 0)) {
         char p[600];
         setting_path(st, p, sizeof p);
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: unknown key '%s' (misspelt, or not used by this scene)", s->path,
-                       line_of(st), p);
+        return cm_fail(err, CM_ERR_KEY, "%s: unknown key '%s' (misspelt, or not used by this scene)", where(s, st), p);
     }
     /* Elements of a numeric array are read as a whole. */
     if (config_setting_type(st) == CONFIG_TYPE_ARRAY)
@@ -395,7 +404,7 @@ int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *e
         for (int k = 0; sections[k]; k++)
             ours |= strcmp(name, sections[k]) == 0;
         if (!ours && config_setting_get_hook(st) != &g_known_marker)
-            return cm_fail(err, CM_ERR_KEY, "%s:%d: unknown section '%s'", s->path, line_of(st), name);
+            return cm_fail(err, CM_ERR_KEY, "%s: unknown section '%s'", where(s, st), name);
         if (ours) {
             int rc = find_unread(s, st, err);
             if (rc)

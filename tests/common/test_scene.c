@@ -187,6 +187,10 @@ static int set_overrides_values(void)
     ENSURE(cm_scene_double(s, "dem.layers.[1].radius", 0, 1, &r1, &err) == CM_OK && r1 == 0.005);
     ENSURE(cm_scene_bool_opt(s, "dem.verbose", true, &verbose, &err) == CM_OK && !verbose);
     ENSURE(cm_scene_double(s, "run.target.tolerance", 0, 1, &tol, &err) == CM_OK && tol == 0.05);
+    /* A key the override created has no line: messages say where it came from. */
+    ENSURE(cm_scene_set(s, "run.target.tolerance=5", &err) == CM_OK);
+    ENSURE(cm_scene_double(s, "run.target.tolerance", 0, 1, &tol, &err) == CM_ERR_RANGE);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg (--set)") && strstr(err.msg, "run.target.tolerance"), "%s", err.msg);
     /* An integer key refuses a fractional value, through its reader. */
     long n;
     ENSURE(cm_scene_set(s, "dem.count=3", &err) == CM_OK);

@@ -273,6 +273,14 @@ static int tire_small_runs(void)
     ENSURE(v[0] < 0);                      /* the tire works on the soil */
     ENSURE_REL(v[1], v[0], 0.05);          /* both sides see the same work */
     ENSURE(v[2] > 0.001 && v[2] < 0.08);   /* it did sink, not through the bed */
+    /* The summary reports the coupling's own error, as traction.csv has it. */
+    double wd, wf, gap;
+    p = strstr(log, "interface work of the grains on the tire: seen by the DEM ");
+    ENSURE(p && sscanf(p, "interface work of the grains on the tire: seen by the DEM %lf J, by the FEM %lf J; "
+                          "FEM - DEM = %lf J", &wd, &wf, &gap) == 3);
+    ENSURE_REL(wd, v[0], 1e-5);
+    ENSURE_REL(wf, v[1], 1e-5);
+    ENSURE_NEAR(gap, v[1] - v[0], 0.01 * fabs(v[1] - v[0]) + 1e-12);
     ENSURE(shm_clean(&l));
     return 0;
 }

@@ -29,8 +29,8 @@
  *   pressure = 0.14e6;          # Pa, inflation (table 2)
  *   gravity = [0.0, 0.0, -9.81];# m/s^2, world frame
  *   power_iterations = 300;     # stable-step estimate
- *   check_every = 200;          # element guard every N exchanges (0 = never): inverted or
- *   max_strain = 0.5;           #   stretched beyond max_strain (|strain component|) stops the run
+ *   check_every = 10;           # energy-growth guard every N exchanges, element guard (inverted, or
+ *   max_strain = 0.5;           #   |strain component| above max_strain) every 10 N; 0 = never
  *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
  */
 #include <stdio.h>
@@ -58,7 +58,7 @@ fem_config fem_config_default(void)
     c.pressure = 0.14e6;
     c.gravity[2] = -9.81;
     c.power_iterations = 300;
-    c.check_every = 200;
+    c.check_every = 10;
     c.max_strain = 0.5;
     return c;
 }

@@ -56,7 +56,7 @@ void fem_model_build_load(fem_model *m, const double *f_iface);
  * setting to change, on the first tetrahedron of the current configuration
  * X + u that is inverted (signed volume <= 0) or stretched beyond
  * cfg.max_strain (largest |component| of its small strain). O(n_tets), no
- * allocation; fem_advance calls it every cfg.check_every intervals. */
+ * allocation; fem_advance calls it every 10 cfg.check_every intervals. */
 int fem_check_elements(const fem_model *m, cm_error *err);
 
 /* Energy guard: fails when the tire's energy E (above) has grown by more than

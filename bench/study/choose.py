@@ -14,9 +14,11 @@ quantity is within the tolerance, the one with the shortest wall time is
 chosen. Its settings (the knobs of that run, not the study's shortened
 travel) go to stdout, one KEY=VALUE per line, for `./run` to pass as --set;
 what was chosen and why goes to stderr. A run's error is measured against
-the study's reference (its finest run, or the closed form): a tolerance
-below the reference's own 95 % confidence interval cannot be verified by the
-study and is refused, as is a target no run met (exit 3, with the best that
+the study's reference (its finest run, whose own error is taken as its 95 %
+confidence interval, or the closed form): a tolerance
+below the reference's own 95 % confidence interval, or below the spread of
+the same settings over random beds (the `_noise` columns), cannot be
+verified by the study and is refused, as is a target no run met (exit 3, with the best that
 was reached); no results for the scene, or a malformed target: exit 2.
 """
 import argparse
@@ -96,10 +98,15 @@ def choose(rows, quantity, tol, source):
         raise Refusal(3, "the study cannot tell %s to %.3g %%: its reference run's own 95 %% confidence interval "
                          "is +-%.3g %% (%s); ask for at least that, or rerun the study with a longer travel"
                       % (quantity, 100 * tol, 100 * noise, source))
+    spread = fnum(rows[0].get(quantity + "_noise"))
+    if math.isfinite(spread) and tol < spread:
+        raise Refusal(3, "the study cannot tell %s to %.3g %%: the same settings with another random bed differ "
+                         "by %.3g %% (%s, column %s_noise); ask for at least that"
+                      % (quantity, 100 * tol, 100 * spread, source, quantity))
     scored = []
     for r in rows:
-        if r["status"] != "ok" or r.get("stable") != "yes":
-            continue
+        if r["status"] != "ok" or r.get("stable") != "yes" or r["knob"] == "dem.bed.seed":
+            continue  # (the seed runs measure the noise, they are not settings)
         e = noise if r["run"] == "reference" else fnum(r.get(quantity + "_err"))
         w = fnum(r.get("wall_s"))
         if math.isfinite(e) and math.isfinite(w):

@@ -63,6 +63,13 @@ def refuses_below_noise_floor():
     ensure("refused" in err and "cannot tell drawbar_pull to 1 %" in err and "+-2 %" in err, err)
 
 
+def refuses_below_seed_spread():
+    # The same settings on another random bed moved the sinkage by 3 %.
+    rc, out, err = choose(TIRE, "--accuracy", "sinkage=2.5%", "--results", RESULTS)
+    ensure(rc == 3 and out == [], (rc, out))
+    ensure("another random bed differ by 3 %" in err and "sinkage_noise" in err, err)
+
+
 def refuses_when_none_meets():
     # Closed-form study: peak force to 1e-6 is better than any run did.
     rc, out, err = choose(PLATE, "--accuracy", "peak_force=0.0001%", "--results", RESULTS)
@@ -126,7 +133,8 @@ def launcher_refuses():
     ensure("[accuracy] refused: no setting in" in log and "[dem]" not in log and "[fem]" not in log, log)
 
 
-CASES = {f.__name__: f for f in (picks_fastest_within_tolerance, refuses_below_noise_floor, refuses_when_none_meets,
+CASES = {f.__name__: f for f in (picks_fastest_within_tolerance, refuses_below_noise_floor, refuses_below_seed_spread,
+                                 refuses_when_none_meets,
                                  bad_targets_refused, scene_target_read, launcher_runs_chosen_settings,
                                  launcher_refuses)}
 

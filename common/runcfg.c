@@ -1,5 +1,6 @@
 #include "runcfg.h"
 
+#include <stdio.h>
 #include <string.h>
 
 int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
@@ -17,5 +18,16 @@ int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
         (rc = cm_scene_double_opt(s, "coupling.max_overlap", 0.0, 1.0, 0.2, &c->max_overlap, err)))
         return rc;
     c->exchange_every = (int)every;
+    if (cm_scene_has(s, "run.target")) {
+        /* The quantities the study measures (bench/study/run). */
+        static const char *const quantities[] = {"drawbar_pull", "gross_traction", "sinkage", "deflection",
+                                                 "contact_time", "peak_force", "restitution", NULL};
+        int q;
+        if ((rc = cm_scene_choice(s, "run.target.quantity", quantities, &q, err)) ||
+            (rc = cm_scene_double(s, "run.target.tolerance", 1e-6, 10.0, &c->target_tolerance, err)) ||
+            (rc = cm_scene_string_opt(s, "run.target.study", "", c->target_study, sizeof c->target_study, err)))
+            return rc;
+        snprintf(c->target_quantity, sizeof c->target_quantity, "%s", quantities[q]);
+    }
     return CM_OK;
 }

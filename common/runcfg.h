@@ -16,6 +16,12 @@ typedef struct cm_run_config {
     double connect_timeout;/* coupling.connect_timeout, s: wait this long for the peer to start (default 120) */
     double max_overlap;    /* coupling.max_overlap: stop when a grain overlap exceeds this fraction of its
                               radius (default 0.2; 0 = never) */
+    /* run.target = { quantity = "drawbar_pull"; tolerance = 0.05; study = "tire_small"; }: the accuracy the
+     * user asks for. The launcher (bench/study/choose.py) picks the settings from the study results before
+     * the servers start; the servers only check the keys. Empty quantity: no target. */
+    char target_quantity[32];
+    double target_tolerance; /* relative, e.g. 0.05 for 5 % */
+    char target_study[64];   /* which study's results (default: the scene file's name) */
 } cm_run_config;
 
 int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err);

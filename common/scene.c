@@ -7,10 +7,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The --set overrides of this process (cm_scene_add_override). */
+static const char *g_overrides[CM_SCENE_MAX_OVERRIDES];
+static int g_n_overrides;
+
 struct cm_scene {
     config_t cfg;
     char path[1024];
     char dir[1024];
+    char where[1100]; /* message buffer of where() */
 };
 
 /* A setting counts as read when its hook points at this marker. */
@@ -25,6 +30,17 @@ static void mark_known(config_setting_t *st)
 static int line_of(const config_setting_t *st)
 {
     return st ? (int)config_setting_source_line(st) : 0;
+}
+
+/* "file:line" of a setting, or "file (--set)" for one an override created. */
+static const char *where(cm_scene *s, const config_setting_t *st)
+{
+    int line = line_of(st);
+    if (line > 0)
+        snprintf(s->where, sizeof s->where, "%s:%d", s->path, line);
+    else
+        snprintf(s->where, sizeof s->where, "%s (--set)", s->path);
+    return s->where;
 }
 
 static int open_common(cm_scene *s, const char *name, cm_scene **out)
@@ -60,7 +76,15 @@ int cm_scene_open(const char *path, cm_scene **out, cm_error *err)
         free(s);
         return CM_ERR_PARSE;
     }
-    return open_common(s, path, out);
+    open_common(s, path, out);
+    for (int i = 0; i < g_n_overrides; i++) {
+        int rc = cm_scene_set(s, g_overrides[i], err);
+        if (rc) {
+            cm_scene_close(out);
+            return rc;
+        }
+    }
+    return CM_OK;
 }
 
 int cm_scene_open_string(const char *text, const char *name, cm_scene **out, cm_error *err)
@@ -127,10 +151,10 @@ static int as_double(cm_scene *s, const config_setting_t *st, const char *path, 
     case CONFIG_TYPE_INT: *out = (double)config_setting_get_int(st); break;
     case CONFIG_TYPE_INT64: *out = (double)config_setting_get_int64(st); break;
     default:
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be a number", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be a number", where(s, st), path);
     }
     if (!isfinite(*out))
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' is not a finite number", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' is not a finite number", where(s, st), path);
     return CM_OK;
 }
 
@@ -138,8 +162,7 @@ static int check_range(cm_scene *s, const config_setting_t *st, const char *path
                        cm_error *err)
 {
     if (v < lo || v > hi)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = %g is outside the allowed range [%g, %g]", s->path,
-                       line_of(st), path, v, lo, hi);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = %g is outside the allowed range [%g, %g]", where(s, st), path, v, lo, hi);
     return CM_OK;
 }
 
@@ -180,11 +203,11 @@ int cm_scene_int(cm_scene *s, const char *path, long lo, long hi, long *out, cm_
     case CONFIG_TYPE_INT: v = config_setting_get_int(st); break;
     case CONFIG_TYPE_INT64: v = config_setting_get_int64(st); break;
     default:
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be an integer", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be an integer", where(s, st), path);
     }
     if (v < lo || v > hi)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = %lld is outside the allowed range [%ld, %ld]",
-                       s->path, line_of(st), path, v, lo, hi);
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = %lld is outside the allowed range [%ld, %ld]",
+                       where(s, st), path, v, lo, hi);
     *out = (long)v;
     return CM_OK;
 }
@@ -207,7 +230,7 @@ int cm_scene_bool_opt(cm_scene *s, const char *path, bool def, bool *out, cm_err
     }
     mark_known(st);
     if (config_setting_type(st) != CONFIG_TYPE_BOOL)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be true or false", s->path, line_of(st), path);
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be true or false", where(s, st), path);
     *out = config_setting_get_bool(st) != 0;
     return CM_OK;
 }
@@ -219,11 +242,11 @@ int cm_scene_string(cm_scene *s, const char *path, char *buf, size_t len, cm_err
         return missing(s, path, err);
     mark_known(st);
     if (config_setting_type(st) != CONFIG_TYPE_STRING)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be a string in double quotes", s->path, line_of(st),
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be a string in double quotes", where(s, st),
                        path);
     const char *v = config_setting_get_string(st);
     if (strlen(v) >= len)
-        return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' is longer than %zu characters", s->path, line_of(st),
+        return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' is longer than %zu characters", where(s, st),
                        path, len - 1);
     memcpy(buf, v, strlen(v) + 1);
     return CM_OK;
@@ -248,8 +271,7 @@ int cm_scene_doubles(cm_scene *s, const char *path, int n, double lo, double hi,
     mark_known(st);
     int type = config_setting_type(st);
     if ((type != CONFIG_TYPE_ARRAY && type != CONFIG_TYPE_LIST) || config_setting_length(st) != n)
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: key '%s' must be an array of %d numbers, e.g. [%s]", s->path,
-                       line_of(st), path, n, n == 3 ? "0.0, 0.0, -9.81" : "...");
+        return cm_fail(err, CM_ERR_KEY, "%s: key '%s' must be an array of %d numbers, e.g. [%s]", where(s, st), path, n, n == 3 ? "0.0, 0.0, -9.81" : "...");
     for (int i = 0; i < n; i++) {
         config_setting_t *el = config_setting_get_elem(st, (unsigned)i);
         char elpath[600];
@@ -291,7 +313,7 @@ int cm_scene_choice(cm_scene *s, const char *path, const char *const *choices, i
         snprintf(list + used, sizeof list - used, "%s\"%s\"", i ? ", " : "", choices[i]);
     }
     config_setting_t *st = config_lookup(&s->cfg, path);
-    return cm_fail(err, CM_ERR_RANGE, "%s:%d: key '%s' = \"%s\" is not one of %s", s->path, line_of(st), path, word,
+    return cm_fail(err, CM_ERR_RANGE, "%s: key '%s' = \"%s\" is not one of %s", where(s, st), path, word,
                    list);
 }
 
@@ -357,8 +379,7 @@ static int find_unread(cm_scene *s, config_setting_t *st, cm_error *err)
     if (config_setting_get_hook(st) != &g_known_marker && (!aggregate || config_setting_length(st) == 0)) {
         char p[600];
         setting_path(st, p, sizeof p);
-        return cm_fail(err, CM_ERR_KEY, "%s:%d: unknown key '%s' (misspelt, or not used by this scene)", s->path,
-                       line_of(st), p);
+        return cm_fail(err, CM_ERR_KEY, "%s: unknown key '%s' (misspelt, or not used by this scene)", where(s, st), p);
     }
     /* Elements of a numeric array are read as a whole. */
     if (config_setting_type(st) == CONFIG_TYPE_ARRAY)
@@ -383,7 +404,7 @@ int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *e
         for (int k = 0; sections[k]; k++)
             ours |= strcmp(name, sections[k]) == 0;
         if (!ours && config_setting_get_hook(st) != &g_known_marker)
-            return cm_fail(err, CM_ERR_KEY, "%s:%d: unknown section '%s'", s->path, line_of(st), name);
+            return cm_fail(err, CM_ERR_KEY, "%s: unknown section '%s'", where(s, st), name);
         if (ours) {
             int rc = find_unread(s, st, err);
             if (rc)
@@ -392,3 +413,176 @@ int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *e
     }
     return CM_OK;
 }
+
+/* ---- overrides (--set key=value) ------------------------------------------ */
+
+/* Deep copy of src as a new child `name` of parent (name NULL inside lists
+ * and arrays). */
+static config_setting_t *copy_setting(config_setting_t *parent, const char *name, const config_setting_t *src)
+{
+    int type = config_setting_type(src);
+    config_setting_t *d = config_setting_add(parent, name, type);
+    if (!d)
+        return NULL;
+    int ok = CONFIG_TRUE;
+    switch (type) {
+    case CONFIG_TYPE_INT: ok = config_setting_set_int(d, config_setting_get_int(src)); break;
+    case CONFIG_TYPE_INT64: ok = config_setting_set_int64(d, config_setting_get_int64(src)); break;
+    case CONFIG_TYPE_FLOAT: ok = config_setting_set_float(d, config_setting_get_float(src)); break;
+    case CONFIG_TYPE_BOOL: ok = config_setting_set_bool(d, config_setting_get_bool(src)); break;
+    case CONFIG_TYPE_STRING: ok = config_setting_set_string(d, config_setting_get_string(src)); break;
+    default:
+        for (int i = 0; i < config_setting_length(src); i++) {
+            const config_setting_t *el = config_setting_get_elem(src, (unsigned)i);
+            if (!copy_setting(d, config_setting_name(el), el))
+                return NULL;
+        }
+    }
+    return ok == CONFIG_TRUE ? d : NULL;
+}
+
+static bool is_number_type(int t)
+{
+    return t == CONFIG_TYPE_INT || t == CONFIG_TYPE_INT64 || t == CONFIG_TYPE_FLOAT;
+}
+
+static double number_of(const config_setting_t *st)
+{
+    switch (config_setting_type(st)) {
+    case CONFIG_TYPE_INT: return config_setting_get_int(st);
+    case CONFIG_TYPE_INT64: return (double)config_setting_get_int64(st);
+    default: return config_setting_get_float(st);
+    }
+}
+
+/* The parent group of `key` (all but its last component), created as groups
+ * where missing; *last points at the last component within key. */
+static config_setting_t *parent_for(cm_scene *s, const char *key, const char **last, const char *assignment,
+                                    cm_error *err)
+{
+    const char *dot = strrchr(key, '.');
+    *last = dot ? dot + 1 : key;
+    if (!dot)
+        return config_root_setting(&s->cfg);
+    char path[512];
+    snprintf(path, sizeof path, "%.*s", (int)(dot - key), key);
+    config_setting_t *p = config_lookup(&s->cfg, path);
+    if (p)
+        return p;
+    const char *ignored;
+    config_setting_t *grand = parent_for(s, path, &ignored, assignment, err);
+    if (!grand)
+        return NULL;
+    if (!config_setting_is_group(grand) || ignored[0] == '[') {
+        cm_fail(err, CM_ERR_KEY, "%s: --set %s: '%s' is not in the scene and cannot be created there", s->path,
+                assignment, path);
+        return NULL;
+    }
+    p = config_setting_add(grand, ignored, CONFIG_TYPE_GROUP);
+    if (!p)
+        cm_fail(err, CM_ERR_KEY, "%s: --set %s: cannot create group '%s'", s->path, assignment, path);
+    return p;
+}
+
+int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err)
+{
+    const char *eq = strchr(assignment, '=');
+    char key[512], value[1024];
+    if (!eq || eq == assignment)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE, e.g. --set coupling.dt=2e-5", assignment);
+    /* Trimmed key and value. */
+    const char *k0 = assignment, *k1 = eq, *v0 = eq + 1, *v1 = assignment + strlen(assignment);
+    while (k0 < k1 && (*k0 == ' ' || *k0 == '\t'))
+        k0++;
+    while (k1 > k0 && (k1[-1] == ' ' || k1[-1] == '\t'))
+        k1--;
+    while (v0 < v1 && (*v0 == ' ' || *v0 == '\t'))
+        v0++;
+    while (v1 > v0 && (v1[-1] == ' ' || v1[-1] == '\t' || v1[-1] == ';'))
+        v1--;
+    if (k1 == k0 || (size_t)(k1 - k0) >= sizeof key || v1 == v0 || (size_t)(v1 - v0) >= sizeof value - 8)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE with a non-empty key and value", assignment);
+    snprintf(key, sizeof key, "%.*s", (int)(k1 - k0), k0);
+    snprintf(value, sizeof value, "%.*s", (int)(v1 - v0), v0);
+
+    /* The value in libconfig syntax, as one setting `v`; a bare word that
+     * does not parse is taken as a string. */
+    config_t tmp;
+    config_init(&tmp);
+    char text[1100];
+    snprintf(text, sizeof text, "v = %s;", value);
+    const config_setting_t *src = NULL;
+    if (config_read_string(&tmp, text) && config_setting_length(config_root_setting(&tmp)) == 1)
+        src = config_lookup(&tmp, "v");
+    bool bare = src == NULL;
+    if (bare && strpbrk(value, "\"=;{}()[],#") != NULL) {
+        config_destroy(&tmp);
+        return cm_fail(err, CM_ERR_PARSE, "%s: --set %s: the value is not valid libconfig syntax", s->path,
+                       assignment);
+    }
+
+    int rc = CM_OK;
+    config_setting_t *st = config_lookup(&s->cfg, key);
+    int et = st ? config_setting_type(st) : CONFIG_TYPE_NONE;
+    int vt = src ? config_setting_type(src) : CONFIG_TYPE_STRING;
+    const char *last = "";
+    config_setting_t *parent = st ? config_setting_parent(st) : NULL;
+    bool in_array = parent && !config_setting_is_group(parent);
+    int ok = CONFIG_TRUE;
+    if (st && et == CONFIG_TYPE_STRING && (bare || vt != CONFIG_TYPE_GROUP)) {
+        /* A string key takes the text as written (name=run3, name=42). */
+        ok = config_setting_set_string(st, src && vt == CONFIG_TYPE_STRING ? config_setting_get_string(src) : value);
+    } else if (st && et == CONFIG_TYPE_FLOAT && is_number_type(vt)) {
+        ok = config_setting_set_float(st, number_of(src));
+    } else if (st && (et == CONFIG_TYPE_INT || et == CONFIG_TYPE_INT64) && (vt == CONFIG_TYPE_INT || vt == CONFIG_TYPE_INT64)) {
+        ok = et == CONFIG_TYPE_INT && vt == CONFIG_TYPE_INT ? config_setting_set_int(st, config_setting_get_int(src))
+                                                             : config_setting_set_int64(st, config_setting_get_int64(src));
+    } else if (st && et == CONFIG_TYPE_BOOL && vt == CONFIG_TYPE_BOOL) {
+        ok = config_setting_set_bool(st, config_setting_get_bool(src));
+    } else if (st && in_array) {
+        if (bare || !is_number_type(vt) || !is_number_type(et))
+            rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: an element of '%.*s' can only be given a number", s->path,
+                         assignment, (int)(strrchr(key, '.') ? strrchr(key, '.') - key : 0), key);
+        else
+            ok = et == CONFIG_TYPE_FLOAT ? config_setting_set_float(st, number_of(src))
+                                         : config_setting_set_int64(st, (long long)number_of(src));
+    } else {
+        /* Missing, or a value of another kind (an array for a group, a float
+         * for an int): the value's own type, judged by the reader. */
+        char name[256];
+        if (st) {
+            snprintf(name, sizeof name, "%s", config_setting_name(st));
+            config_setting_remove(parent, name);
+        } else if ((parent = parent_for(s, key, &last, assignment, err)) != NULL) {
+            snprintf(name, sizeof name, "%s", last);
+        } else {
+            rc = err ? err->code : CM_ERR_KEY;
+        }
+        if (!rc && (name[0] == '[' || !config_setting_is_group(parent)))
+            rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: '%s' is not in the scene and cannot be created", s->path,
+                         assignment, key);
+        if (!rc && bare) {
+            config_setting_t *d = config_setting_add(parent, name, CONFIG_TYPE_STRING);
+            ok = d && config_setting_set_string(d, value);
+        } else if (!rc) {
+            ok = copy_setting(parent, name, src) != NULL;
+        }
+    }
+    config_destroy(&tmp);
+    if (!rc && ok != CONFIG_TRUE)
+        rc = cm_fail(err, CM_ERR_KEY, "%s: --set %s: cannot set '%s' to that value", s->path, assignment, key);
+    return rc;
+}
+
+int cm_scene_add_override(const char *assignment, cm_error *err)
+{
+    const char *eq = strchr(assignment, '=');
+    if (!eq || eq == assignment)
+        return cm_fail(err, CM_ERR_PARSE, "--set %s: expected KEY=VALUE, e.g. --set coupling.dt=2e-5", assignment);
+    if (g_n_overrides >= CM_SCENE_MAX_OVERRIDES)
+        return cm_fail(err, CM_ERR_RANGE, "--set %s: more than %d overrides", assignment, CM_SCENE_MAX_OVERRIDES);
+    g_overrides[g_n_overrides++] = assignment;
+    return CM_OK;
+}
+
+void cm_scene_clear_overrides(void) { g_n_overrides = 0; }

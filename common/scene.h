@@ -60,4 +60,26 @@ void cm_scene_mark_known(cm_scene *s, const char *path);
  * all reading is done. */
 int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *err);
 
+/* Overrides: "key.path=value", as given by `--set` on the command line, put
+ * into the parsed tree before any getter reads it, so the strict readers see
+ * an overridden scene exactly as if the file said so (an unknown key is still
+ * refused, by cm_scene_check_unknown).
+ *
+ * The value is libconfig syntax (2e-5, 3, true, "newmark", [0.0, 0.1, 0.2]);
+ * a bare word is a string. An existing setting keeps its type where the value
+ * fits it (dt=1 into a float key stays a float, name=run3 into a string key is
+ * a string); otherwise the value's own type replaces it and the reader judges.
+ * A missing key is created, with its missing parent groups. */
+int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err);
+
+/* Process-wide list of overrides that cm_scene_open applies, in order, to
+ * every scene file it opens (not cm_scene_open_string). A server's main()
+ * registers its `--set` arguments here while parsing the command line; the
+ * assignment string is kept by pointer (argv lives as long as the process).
+ * Fails on a malformed assignment (no '=', empty key) or beyond
+ * CM_SCENE_MAX_OVERRIDES. */
+enum { CM_SCENE_MAX_OVERRIDES = 64 };
+int cm_scene_add_override(const char *assignment, cm_error *err);
+void cm_scene_clear_overrides(void);
+
 #endif

@@ -192,6 +192,7 @@ typedef struct dem_surface_total {
     double traction_pos; /* N, T_H: sum of positive per-contact components along travel */
     double traction_neg; /* N, T_R: sum of negative per-contact components (<= 0) */
     int contacts;        /* grain–surface contacts after de-duplication */
+    double max_overlap;  /* largest grain–surface overlap / grain radius (the run-time guard's) */
 } dem_surface_total;
 
 /* Per-node forces ON the surface from the last dem_step_surface (3n, N),
@@ -224,7 +225,7 @@ typedef struct dem_stats {
     double pe_grav;       /* J, -m g.x summed */
     double e_elastic;     /* J, normal Hertz energy 8/15 E* sqrt(R*) delta^(5/2) */
     int contacts_gg, contacts_gw, contacts_gs;
-    double max_overlap;   /* largest delta / r_min of the pair */
+    double max_overlap;   /* largest delta / r_min of a pair, grain–surface contacts included */
     dem_profile profile;
 } dem_stats;
 

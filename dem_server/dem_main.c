@@ -264,7 +264,9 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
-                    "  The granular side of the co-simulation; run both servers with ./run SCENE.\n");
+                    "                  [--set KEY=VALUE]...\n"
+                    "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
+                    "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");
     return 2;
 }
 
@@ -283,7 +285,14 @@ int main(int argc, char **argv)
             o.threads = atoi(v), i++;
         else if (strcmp(a, "--standalone") == 0)
             o.standalone = 1;
-        else
+        else if (strcmp(a, "--set") == 0 && v) {
+            cm_error err = {0};
+            if (cm_scene_add_override(v, &err)) {
+                fprintf(stderr, "dem_server: %s\n", err.msg);
+                return 2;
+            }
+            i++;
+        } else
             return usage();
     }
     if (!o.scene || (!o.shm && !o.standalone))

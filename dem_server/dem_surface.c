@@ -670,6 +670,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 else
                     tot->traction_neg += along;
                 tot->contacts++;
+                tot->max_overlap = fmax(tot->max_overlap, delta / Rc);
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;
@@ -692,6 +693,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         s->tot.traction_pos += s->ttot[t].traction_pos;
         s->tot.traction_neg += s->ttot[t].traction_neg;
         s->tot.contacts += s->ttot[t].contacts;
+        s->tot.max_overlap = fmax(s->tot.max_overlap, s->ttot[t].max_overlap);
     }
     if (overflow_slot >= 0)
         return cm_fail(err, CM_ERR_RANGE,

@@ -1078,7 +1078,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
     double t2 = cm_now();
     w->prof.integrate += t2 - t1;
     if (bad < n)
-        return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position (dt too large?)",
+        return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
                        w->step, w->time, g->id[bad]);
     if (maxd2 > half * half) {
         int rc = neighbour_rebuild(w, err);
@@ -1142,6 +1142,9 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     s->contacts_gg = w->contacts_gg;
     s->contacts_gw = w->contacts_gw;
     s->contacts_gs = w->surf ? w->surf->tot.contacts : 0;
+    /* Grain–surface overlaps of the last surface step (the tire's). */
+    if (w->surf)
+        s->max_overlap = fmax(s->max_overlap, w->surf->tot.max_overlap);
     s->profile = w->prof;
 }
 

@@ -82,6 +82,8 @@ typedef struct fem_config {
     int power_iterations;    /* for the stable step: 300 */
     char output_dir[512];    /* results folder ("" = no output) */
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
+    int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
+    double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
 } fem_config;
 
 fem_config fem_config_default(void);

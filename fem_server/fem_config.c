@@ -29,6 +29,8 @@
  *   pressure = 0.14e6;          # Pa, inflation (table 2)
  *   gravity = [0.0, 0.0, -9.81];# m/s^2, world frame
  *   power_iterations = 300;     # stable-step estimate
+ *   check_every = 10;           # energy-growth guard every N exchanges, element guard (inverted, or
+ *   max_strain = 0.5;           #   |strain component| above max_strain) every 10 N; 0 = never
  *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
  */
 #include <stdio.h>
@@ -56,6 +58,8 @@ fem_config fem_config_default(void)
     c.pressure = 0.14e6;
     c.gravity[2] = -9.81;
     c.power_iterations = 300;
+    c.check_every = 10;
+    c.max_strain = 0.5;
     return c;
 }
 
@@ -145,5 +149,7 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
         snprintf(c->output_dir, sizeof c->output_dir, "%s", dir);
     }
     TRY(read_int_opt(s, "fem.output.every", 0, 1000000000, 0, &c->output_every, err));
+    TRY(read_int_opt(s, "fem.check_every", 0, 1000000000, c->check_every, &c->check_every, err));
+    TRY(cm_scene_double_opt(s, "fem.max_strain", 1e-6, 100.0, c->max_strain, &c->max_strain, err));
     return CM_OK;
 }

@@ -23,6 +23,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fem_element.h"
 #include "fem_model.h"
 #include "log.h"
 
@@ -136,7 +137,8 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     if (rc)
         goto fail;
     m->b_pressure = calloc((size_t)m->s->n_dof, sizeof(double));
-    if (!m->b_pressure) {
+    m->u_prev = calloc((size_t)m->s->n_dof, sizeof(double));
+    if (!m->b_pressure || !m->u_prev) {
         rc = cm_fail(err, CM_ERR_NOMEM, "fem: out of memory");
         goto fail;
     }
@@ -202,6 +204,7 @@ void fem_destroy(fem_model **pm)
     fem_solver_destroy(&m->s);
     fem_mesh_free(&m->mesh);
     free(m->b_pressure);
+    free(m->u_prev);
     free(m->if_nodes);
     free(m->if_force);
     free(m->if_tris);
@@ -388,6 +391,16 @@ static void wheel_move(fem_wheel *w, double dt)
     memcpy(w->R, Rn, sizeof Rn);
 }
 
+/* E_kin + E_el - b_pressure.u, J (rim frame). */
+static double mechanical_energy(const fem_model *m)
+{
+    const fem_solver *s = m->s;
+    double pu = 0.0;
+    for (int d = 0; d < s->n_dof; d++)
+        pu += m->b_pressure[d] * s->u[d];
+    return fem_solver_kinetic_energy(s) + fem_solver_elastic_energy(s) - pu;
+}
+
 int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *err)
 {
     if (!(interval > 0.0))
@@ -415,11 +428,23 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
         if (rc)
             return rc;
     }
+    fem_solver *s = m->s;
+    if (!m->energy_started) {
+        m->energy0 = mechanical_energy(m);
+        m->energy_started = true;
+    }
+    memcpy(m->u_prev, s->u, (size_t)s->n_dof * sizeof *s->u);
     for (int i = 0; i < n; i++) {
-        int rc = fem_solver_step(m->s, h, err);
+        int rc = fem_solver_step(s, h, err);
         if (rc)
             return rc;
     }
+    /* The load was constant over the interval: its work is (f - b_p).du. */
+    double dw = 0.0;
+    for (int d = 0; d < s->n_dof; d++)
+        dw += (s->f[d] - m->b_pressure[d]) * (s->u[d] - m->u_prev[d]);
+    m->work_in += dw;
+    m->work_abs += fabs(dw);
     wheel_move(&m->wheel, interval);
     m->advances++;
     /* Instability shows first as huge or non-finite displacements. */
@@ -432,12 +457,74 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
     if (!(umax < 10.0 * m->size))
         return cm_fail(err, CM_ERR_NUMERIC, "fem: displacement %.3g m at t = %.6g s (step %ld): integration "
                        "unstable (dt %.4g s, limit %.4g s)", umax, m->s->time, m->s->steps, h, m->stab.dt_limit);
+    /* The energy costs about one K u product, the elements several: these
+     * every 10 energy checks (an unstable explicit tire blows up within some
+     * 20 intervals, an element inverts over many). */
+    if (m->cfg.check_every > 0 && m->advances % m->cfg.check_every == 0) {
+        int rc = fem_check_energy(m, err);
+        if (!rc && m->advances % (10L * m->cfg.check_every) == 0)
+            rc = fem_check_elements(m, err);
+        if (rc)
+            return rc;
+    }
     if (m->out && m->cfg.output_every > 0 && m->advances % m->cfg.output_every == 0) {
         int rc = fem_output_snapshot(m->out, m, err);
         if (!rc)
             rc = fem_output_series(m->out, m, err);
         if (rc)
             return rc;
+    }
+    return CM_OK;
+}
+
+int fem_check_energy(const fem_model *m, cm_error *err)
+{
+    if (m->cfg.integrator == FEM_INTEGRATOR_RIGID || !m->energy_started)
+        return CM_OK;
+    double e = mechanical_energy(m), made = e - m->energy0 - m->work_in;
+    double scale = fem_solver_elastic_energy(m->s) + m->work_abs;
+    if (!(made <= 0.05 * scale + 1e-9))
+        return cm_fail(err, CM_ERR_NUMERIC,
+                       "fem: the tire's energy grew by %.3g J more than its loads put in (%.3g J of work) at t = "
+                       "%.6g s (step %ld): energy growth with no input power, the integration is unstable; lower "
+                       "fem.dt (explicit limit %.4g s) or coupling.dt",
+                       made, m->work_in, m->s->time, m->s->steps, m->stab.dt_limit);
+    return CM_OK;
+}
+
+int fem_check_elements(const fem_model *m, cm_error *err)
+{
+    if (m->cfg.integrator == FEM_INTEGRATOR_RIGID)
+        return CM_OK;
+    const fem_mesh *mesh = &m->mesh;
+    const double *u = m->s->u;
+    for (int e = 0; e < mesh->n_tets; e++) {
+        const int32_t *t = &mesh->tets[4 * e];
+        double x[4][3], ue[4][3], grad[4][3], eps[6];
+        for (int i = 0; i < 4; i++)
+            for (int a = 0; a < 3; a++) {
+                ue[i][a] = u[3 * t[i] + a];
+                x[i][a] = mesh->x[3 * t[i] + a] + ue[i][a];
+            }
+        double v0 = fem_tet_gradients(&mesh->x[3 * t[0]], &mesh->x[3 * t[1]], &mesh->x[3 * t[2]],
+                                      &mesh->x[3 * t[3]], grad);
+        double v = fem_tet_volume(x[0], x[1], x[2], x[3]);
+        if (!(v > 0.0))
+            return cm_fail(err, CM_ERR_NUMERIC,
+                           "fem: element %d inverted (volume %.3g of its initial %.3g m^3) at t = %.6g s (step "
+                           "%ld): the tire is crushed or its integration is unstable; lower fem.dt or "
+                           "coupling.dt, or stiffen fem.material.E",
+                           e, v, v0, m->s->time, m->s->steps);
+        fem_tet_strain(grad, ue, eps);
+        double emax = 0.0;
+        for (int k = 0; k < 6; k++)
+            emax = fabs(eps[k]) > emax || eps[k] != eps[k] ? fabs(eps[k]) : emax;
+        if (!(emax <= m->cfg.max_strain))
+            return cm_fail(err, CM_ERR_NUMERIC,
+                           "fem: element %d stretched to a strain of %.3g (fem.max_strain = %.3g) at t = %.6g s "
+                           "(step %ld): far outside linear elasticity, the integration is unstable or the load "
+                           "too high; lower fem.dt or coupling.dt, or raise fem.max_strain if this is meant",
+                           e, emax, m->cfg.max_strain, m->s->time, m->s->steps);
     }
     return CM_OK;
 }

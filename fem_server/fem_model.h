@@ -25,6 +25,14 @@ struct fem_model {
     long advances;
     double max_substep;     /* s, last sub-step used */
     double size;            /* m, bounding-box diagonal of the mesh */
+    /* Energy guard: E = E_kin + E_el - b_pressure.u (pressure is conservative)
+     * changes only by the work of the other loads (gravity turning with the
+     * rim, the grains): work_in sums (f - b_pressure).du over each interval. */
+    double *u_prev;         /* u at the start of the interval (n_dof) */
+    double energy0;         /* J, E at the first interval */
+    double work_in;         /* J, work of the non-conservative loads since then */
+    double work_abs;        /* J, sum of |work| per interval: the scale of the balance */
+    bool energy_started;
     fem_output *out;
 };
 
@@ -43,5 +51,18 @@ int fem_mesh_write_gmsh(const fem_mesh *m, const char *path, cm_error *err);
 /* Builds the total load of the next interval into s->f: pressure + M R^T g
  * + R^T f_iface (f_iface may be NULL). */
 void fem_model_build_load(fem_model *m, const double *f_iface);
+
+/* Element guard: fails, naming the element, the time and step and the
+ * setting to change, on the first tetrahedron of the current configuration
+ * X + u that is inverted (signed volume <= 0) or stretched beyond
+ * cfg.max_strain (largest |component| of its small strain). O(n_tets), no
+ * allocation; fem_advance calls it every 10 cfg.check_every intervals. */
+int fem_check_elements(const fem_model *m, cm_error *err);
+
+/* Energy guard: fails when the tire's energy E (above) has grown by more than
+ * 5 % of the energy scale (initial elastic energy + the loads' absolute work)
+ * beyond the work the loads put in: energy from nowhere, an unstable
+ * integration. Called by fem_advance every cfg.check_every intervals. */
+int fem_check_energy(const fem_model *m, cm_error *err);
 
 #endif

@@ -1,5 +1,6 @@
 /* Scene-file reader: every kind of user mistake gives an error naming the key
  * and the file line; valid files read back exactly. */
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -157,6 +158,121 @@ static int non_finite_refused(void)
     return 0;
 }
 
+/* --set overrides: values of each type, the existing type kept, new keys
+ * created (and then refused if no reader wants them), bad syntax refused. */
+static int set_overrides_values(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    /* A float key given an integer stays a float; a string key takes a bare word. */
+    ENSURE_MSG(cm_scene_set(s, "run.end_time=2", &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_set(s, "run.name = run3", &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_set(s, "dem.integrator=\"newmark\"", &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_set(s, "dem.E=2.5e7", &err) == CM_OK, "%s", err.msg); /* int key, float value */
+    ENSURE_MSG(cm_scene_set(s, "dem.gravity=[0.0, 0.0, -1.62]", &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_set(s, "dem.layers.[1].radius=0.005", &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_set(s, "dem.verbose=false", &err) == CM_OK, "%s", err.msg);
+    /* A key the file does not have, in a group it does not have either. */
+    ENSURE_MSG(cm_scene_set(s, "run.target.tolerance=0.05", &err) == CM_OK, "%s", err.msg);
+    double t, E, g[3], r1, tol;
+    char name[32], integ[32];
+    bool verbose = true;
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 10, &t, &err) == CM_OK && t == 2.0);
+    ENSURE(cm_scene_string(s, "run.name", name, sizeof name, &err) == CM_OK && strcmp(name, "run3") == 0);
+    ENSURE(cm_scene_string(s, "dem.integrator", integ, sizeof integ, &err) == CM_OK);
+    ENSURE(strcmp(integ, "newmark") == 0);
+    ENSURE(cm_scene_double(s, "dem.E", 0, 1e9, &E, &err) == CM_OK && E == 2.5e7);
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -10, 10, g, &err) == CM_OK && g[2] == -1.62 && g[0] == 0.0);
+    ENSURE(cm_scene_double(s, "dem.layers.[1].radius", 0, 1, &r1, &err) == CM_OK && r1 == 0.005);
+    ENSURE(cm_scene_bool_opt(s, "dem.verbose", true, &verbose, &err) == CM_OK && !verbose);
+    ENSURE(cm_scene_double(s, "run.target.tolerance", 0, 1, &tol, &err) == CM_OK && tol == 0.05);
+    /* A key the override created has no line: messages say where it came from. */
+    ENSURE(cm_scene_set(s, "run.target.tolerance=5", &err) == CM_OK);
+    ENSURE(cm_scene_double(s, "run.target.tolerance", 0, 1, &tol, &err) == CM_ERR_RANGE);
+    ENSURE_MSG(strstr(err.msg, "demo.cfg (--set)") && strstr(err.msg, "run.target.tolerance"), "%s", err.msg);
+    /* An integer key refuses a fractional value, through its reader. */
+    long n;
+    ENSURE(cm_scene_set(s, "dem.count=3", &err) == CM_OK);
+    ENSURE(cm_scene_int(s, "dem.count", 0, 10, &n, &err) == CM_OK && n == 3);
+    ENSURE(cm_scene_set(s, "dem.count=2.5", &err) == CM_OK);
+    ENSURE(cm_scene_int(s, "dem.count", 0, 10, &n, &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "dem.count") && strstr(err.msg, "integer"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+static int set_errors_and_unknown_keys(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    ENSURE(cm_scene_set(s, "coupling.dt", &err) == CM_ERR_PARSE); /* no '=' */
+    ENSURE_MSG(strstr(err.msg, "KEY=VALUE") && strstr(err.msg, "coupling.dt"), "%s", err.msg);
+    ENSURE(cm_scene_set(s, "=3", &err) == CM_ERR_PARSE);
+    ENSURE(cm_scene_set(s, "run.end_time=", &err) == CM_ERR_PARSE);
+    ENSURE(cm_scene_set(s, "run.end_time=[1.0, ", &err) == CM_ERR_PARSE);
+    ENSURE_MSG(strstr(err.msg, "run.end_time") && strstr(err.msg, "libconfig"), "%s", err.msg);
+    /* One value only: no second setting smuggled in. */
+    ENSURE(cm_scene_set(s, "run.end_time=1.0; evil = 2", &err) == CM_ERR_PARSE);
+    /* A list element that does not exist cannot be created. */
+    ENSURE(cm_scene_set(s, "dem.layers.[5].radius=0.1", &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "dem.layers.[5]"), "%s", err.msg);
+    /* An unknown key is accepted by --set and refused by the strict check. */
+    ENSURE(cm_scene_set(s, "dem.dept=0.3", &err) == CM_OK);
+    double v, g[3];
+    char name[32];
+    bool b;
+    int k;
+    static const char *const kinds[] = {"rigid", "explicit", NULL};
+    ENSURE(cm_scene_string(s, "run.name", name, sizeof name, &err) == 0);
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 1, &v, &err) == 0);
+    ENSURE(cm_scene_double(s, "dem.E", 0, 1e9, &v, &err) == 0);
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -10, 10, g, &err) == 0);
+    ENSURE(cm_scene_bool_opt(s, "dem.verbose", false, &b, &err) == 0);
+    ENSURE(cm_scene_choice(s, "dem.integrator", kinds, &k, &err) == 0);
+    ENSURE(cm_scene_double(s, "dem.layers.[0].radius", 0, 1, &v, &err) == 0);
+    ENSURE(cm_scene_double(s, "dem.layers.[1].radius", 0, 1, &v, &err) == 0);
+    static const char *const sections[] = {"run", "dem", NULL};
+    ENSURE(cm_scene_check_unknown(s, sections, &err) == CM_ERR_KEY);
+    ENSURE_MSG(strstr(err.msg, "unknown key 'dem.dept'"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+/* The process-wide list that the servers fill from --set: applied by
+ * cm_scene_open to a file, in order (the last one wins). */
+static int set_applied_by_open(void)
+{
+    char path[] = "/tmp/test_scene_set_XXXXXX";
+    int fd = mkstemp(path);
+    ENSURE(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    ENSURE(f != NULL);
+    fputs(k_scene, f);
+    fclose(f);
+    cm_error err = {0};
+    ENSURE(cm_scene_add_override("run.end_time=0.25", &err) == CM_OK);
+    ENSURE(cm_scene_add_override("run.end_time=0.75", &err) == CM_OK);
+    ENSURE(cm_scene_add_override("nonsense", &err) == CM_ERR_PARSE);
+    cm_scene *s;
+    int rc = cm_scene_open(path, &s, &err);
+    ENSURE_MSG(rc == CM_OK, "%s", err.msg);
+    double t;
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 10, &t, &err) == CM_OK && t == 0.75);
+    cm_scene_close(&s);
+    /* A value no setting can take: the open fails naming the file and the --set. */
+    ENSURE(cm_scene_add_override("dem.gravity.[0]=\"up\"", &err) == CM_OK);
+    ENSURE(cm_scene_open(path, &s, &err) == CM_ERR_KEY && s == NULL);
+    ENSURE_MSG(strstr(err.msg, path) && strstr(err.msg, "--set dem.gravity.[0]"), "%s", err.msg);
+    cm_scene_clear_overrides();
+    ENSURE(cm_scene_open(path, &s, &err) == CM_OK);
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 10, &t, &err) == CM_OK && t == 0.5);
+    cm_scene_close(&s);
+    remove(path);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"reads_values", reads_values},
     {"missing_key_names_key_and_line", missing_key_names_key_and_line},
@@ -165,6 +281,9 @@ static const test_case tests[] = {
     {"unknown_key_is_refused", unknown_key_is_refused},
     {"syntax_error_names_line", syntax_error_names_line},
     {"non_finite_refused", non_finite_refused},
+    {"set_overrides_values", set_overrides_values},
+    {"set_errors_and_unknown_keys", set_errors_and_unknown_keys},
+    {"set_applied_by_open", set_applied_by_open},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -35,6 +35,8 @@ int main(int argc, char **argv)
             shm = argv[i + 1];
         else if (strcmp(argv[i], "--out") == 0)
             out = argv[i + 1];
+        else if (strcmp(argv[i], "--set") == 0 && cm_scene_add_override(argv[i + 1], NULL) != CM_OK)
+            return 2;
     }
     if (!scene_path || !shm) {
         fprintf(stderr, "usage: plate_peer --scene FILE --shm NAME [--out DIR]\n");

@@ -46,9 +46,9 @@ static int start(launch *l, const char *scene, const char *tag, const char *cons
     snprintf(l->out, sizeof l->out, "/tmp/demfem-coupled-%d-%s", (int)getpid(), tag);
     snprintf(l->log, sizeof l->log, "%s.log", l->out);
     mkdir(l->out, 0755);
-    const char *argv[16] = {DEMFEM_SOURCE_DIR "/run", scene, "--out", l->out};
+    const char *argv[32] = {DEMFEM_SOURCE_DIR "/run", scene, "--out", l->out};
     int n = 4;
-    for (int i = 0; extra && extra[i] && n < 15; i++)
+    for (int i = 0; extra && extra[i] && n < 31; i++)
         argv[n++] = extra[i];
     argv[n] = NULL;
     setenv("DEMFEM_NO_BUILD", "1", 1);
@@ -273,6 +273,14 @@ static int tire_small_runs(void)
     ENSURE(v[0] < 0);                      /* the tire works on the soil */
     ENSURE_REL(v[1], v[0], 0.05);          /* both sides see the same work */
     ENSURE(v[2] > 0.001 && v[2] < 0.08);   /* it did sink, not through the bed */
+    /* The summary reports the coupling's own error, as traction.csv has it. */
+    double wd, wf, gap;
+    p = strstr(log, "interface work of the grains on the tire: seen by the DEM ");
+    ENSURE(p && sscanf(p, "interface work of the grains on the tire: seen by the DEM %lf J, by the FEM %lf J; "
+                          "FEM - DEM = %lf J", &wd, &wf, &gap) == 3);
+    ENSURE_REL(wd, v[0], 1e-5);
+    ENSURE_REL(wf, v[1], 1e-5);
+    ENSURE_NEAR(gap, v[1] - v[0], 0.01 * fabs(v[1] - v[0]) + 1e-12);
     ENSURE(shm_clean(&l));
     return 0;
 }
@@ -359,7 +367,62 @@ static int tire_exchange_every_two(void)
     return 0;
 }
 
+/* Runs a scene with --set overrides that must be stopped by a guard: the
+ * launcher fails, the log has `want` (and `setting`, the key to change) in
+ * the error line of `side`, and nothing is left in /dev/shm. */
+static int stopped_by_guard(const char *scene, const char *tag, const char *const *extra, const char *side,
+                            const char *want, const char *setting)
+{
+    launch l;
+    ENSURE(start(&l, scene, tag, extra) == 0);
+    ENSURE(finish(&l, 120) == 0);
+    const char *log = log_text(&l);
+    char line[64];
+    snprintf(line, sizeof line, "[%s] error: ", side);
+    const char *e = strstr(log, line);
+    if (l.status == 0 || !e || !strstr(e, want) || !strstr(e, setting))
+        dump_log(&l);
+    ENSURE(l.status != 0);
+    ENSURE(e && strstr(e, want) && strstr(e, setting));
+    printf("  stopped after %.1f s: %.160s\n", l.wall, e);
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+/* A grain 20 times faster than the plate scene's: its Hertz overlap would
+ * reach ~40 % of the radius; the DEM side stops at coupling.max_overlap. */
+static int guard_grain_overlap(void)
+{
+    const char *extra[] = {"--fem", PLATE_PEER_PATH, "--set", "dem.grains.[0].velocity=[0.0, 0.0, -20.0]", NULL};
+    return stopped_by_guard(SCENES "impact_plate.cfg", "overlap", extra, "dem", "grain overlap reached",
+                            "coupling.max_overlap");
+}
+
+/* A DEM step 30 times its limit (allowed) with the overlap guard off and the
+ * tire far above the bed: the bed blows up to non-finite positions within a
+ * few steps and the DEM side stops naming the step to reduce. */
+static int guard_grain_non_finite(void)
+{
+    const char *extra[] = {"--set", "wheel.start_gap=0.5", "--set", "wheel.sink_velocity=1e-6", "--set",
+                           "coupling.dt=2e-3", "--set", "dem.allow_unstable_dt=true", "--set",
+                           "coupling.max_overlap=0.0", "--set", "run.end_time=2.0", NULL};
+    return stopped_by_guard(SCENES "tire_small.cfg", "nonfinite", extra, "dem", "non-finite", "coupling.dt");
+}
+
+/* An explicit FEM step 1.5 times its computed limit (allowed), the tire
+ * clear of the grains: no load puts energy in, the energy guard stops it. */
+static int guard_tire_energy_growth(void)
+{
+    const char *extra[] = {"--set", "wheel.start_gap=0.05", "--set", "wheel.sink_velocity=1e-6", "--set",
+                           "fem.allow_unstable=true", "--set", "fem.dt=6e-5", "--set", "coupling.dt=1e-5", "--set",
+                           "coupling.exchange_every=6", "--set", "run.end_time=0.05", NULL};
+    return stopped_by_guard(SCENES "tire_small.cfg", "energy", extra, "fem", "energy grew", "fem.dt");
+}
+
 static const test_case tests[] = {
+    {"guard_grain_overlap", guard_grain_overlap},
+    {"guard_grain_non_finite", guard_grain_non_finite},
+    {"guard_tire_energy_growth", guard_tire_energy_growth},
     {"tire_exchange_every_two", tire_exchange_every_two},
     {"tire_from_gmsh_runs", tire_from_gmsh_runs},
     {"tire_small_runs", tire_small_runs},

@@ -1,0 +1,271 @@
+/* The terrain window (dem_window.h): removal behind the wheel, copies of the
+ * settled sample appended in front, end walls following, far grains frozen. */
+#include "dem_window.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dem_world.h"
+#include "log.h"
+
+struct dem_window {
+    dem_window_def def;
+    dem_window_state st;
+    int n_sample;
+    dem_grain_state *sample; /* the stretch, x measured from its start s0 (0 <= x < len), sorted by x */
+    double s0, len;          /* m, where the stretch was taken in the bed, and its length */
+    double sample_reach;     /* m, largest x + r of the stretch (its ragged front end) */
+    double line_mass;        /* kg/m, grain mass per metre of the stretch */
+    double r_max;            /* m, largest radius of the sample bed */
+    int *near;               /* world capacity: slots near the front wall (seam search) */
+};
+
+static int cmp_state_x(const void *a, const void *b)
+{
+    double xa = ((const dem_grain_state *)a)->x[0], xb = ((const dem_grain_state *)b)->x[0];
+    return (xa > xb) - (xa < xb);
+}
+
+/* Index of the wall with unit normal n (within 1e-9), or -1. */
+static int find_wall(const dem_world *w, double nx, double ny)
+{
+    for (int k = 0; k < w->n_walls; k++)
+        if (fabs(w->walls[k].n[0] - nx) < 1e-9 && fabs(w->walls[k].n[1] - ny) < 1e-9 && fabs(w->walls[k].n[2]) < 1e-9)
+            return k;
+    return -1;
+}
+
+int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window **out, cm_error *err)
+{
+    *out = NULL;
+    const dem_grains *g = &w->g;
+    int kb = find_wall(w, 1, 0), kf = find_wall(w, -1, 0);
+    if (kb < 0 || kf < 0)
+        return cm_fail(err, CM_ERR_STATE, "dem.window: the bed has no end walls (normals +x and -x); set "
+                       "dem.bed.side_walls = true");
+    double xb = w->walls[kb].p[0], xf = w->walls[kf].p[0];
+    double s0 = xb + def->sample_margin, len = def->shift;
+    if (s0 + len > xf - def->sample_margin)
+        return cm_fail(err, CM_ERR_RANGE,
+                       "dem.window: the sample stretch [%g, %g) m (dem.window.sample_margin + dem.window.shift) does "
+                       "not fit inside the bed [%g, %g) m away from its end walls; shorten dem.window.shift",
+                       s0, s0 + len, xb, xf);
+    dem_window *win = calloc(1, sizeof *win);
+    if (!win)
+        return cm_fail(err, CM_ERR_NOMEM, "dem.window: out of memory");
+    int n = 0;
+    for (int i = 0; i < g->n; i++) {
+        n += g->x[i] >= s0 && g->x[i] < s0 + len;
+        win->r_max = fmax(win->r_max, g->r[i]);
+    }
+    win->sample = malloc((size_t)(n ? n : 1) * sizeof *win->sample);
+    win->near = malloc((size_t)g->cap * sizeof *win->near);
+    if (!win->sample || !win->near) {
+        dem_window_free(&win);
+        return cm_fail(err, CM_ERR_NOMEM, "dem.window: out of memory for a sample of %d grains", n);
+    }
+    int k = 0;
+    for (int id = 0; id < g->n; id++) {
+        int i = g->slot_of[id];
+        if (!(g->x[i] >= s0 && g->x[i] < s0 + len))
+            continue;
+        dem_grain_state *s = &win->sample[k++];
+        dem_grain_get(w, id, s);
+        s->x[0] -= s0;
+        win->sample_reach = fmax(win->sample_reach, s->x[0] + s->radius);
+        win->line_mass += s->mass / len;
+    }
+    qsort(win->sample, (size_t)n, sizeof *win->sample, cmp_state_x);
+    if (n == 0) {
+        dem_window_free(&win);
+        return cm_fail(err, CM_ERR_RANGE, "dem.window: no grains in the sample stretch [%g, %g) m", s0, s0 + len);
+    }
+    win->n_sample = n;
+    win->def = *def;
+    win->s0 = s0;
+    win->len = len;
+    win->st.x_back = xb;
+    win->st.x_front = xf;
+    win->st.wall_back = kb;
+    win->st.wall_front = kf;
+    win->st.x_freeze = NAN;
+    win->st.seam_min_fraction = 1.0;
+    cm_log_info("window: behind %.3f m, ahead %.3f m, shift %.3f m; sample stretch x in [%.3f, %.3f) m of the bed: %d "
+                "grains (%.1f kg/m)%s",
+                def->behind, def->ahead, def->shift, s0, s0 + len, n, win->line_mass,
+                def->freeze_distance > 0 ? "" : "; no freezing");
+    if (def->freeze_distance > 0)
+        cm_log_info("window: grains farther than %.3f m from the wheel centre (along x) are frozen",
+                    def->freeze_distance);
+    *out = win;
+    return CM_OK;
+}
+
+void dem_window_free(dem_window **wp)
+{
+    dem_window *win = *wp;
+    if (!win)
+        return;
+    free(win->sample);
+    free(win->near);
+    free(win);
+    *wp = NULL;
+}
+
+const dem_window_state *dem_window_get_state(const dem_window *win) { return &win->st; }
+void dem_window_set_state(dem_window *win, const dem_window_state *st) { win->st = *st; }
+
+static void move_wall_x(dem_world *w, int k, double x)
+{
+    double p[3] = {x, w->walls[k].p[1], w->walls[k].p[2]};
+    dem_wall_move(w, k, p);
+}
+
+/* Grain mass per metre with centres in [a, b), relative to the sample's. */
+static double slab_fraction(const dem_window *win, const dem_world *w, double a, double b)
+{
+    const dem_grains *g = &w->g;
+    double m = 0.0;
+    for (int i = 0; i < g->n; i++)
+        if (g->x[i] >= a && g->x[i] < b)
+            m += 1.0 / g->inv_m[i];
+    return m / ((b - a) * win->line_mass);
+}
+
+/* Appends one copy of the sample stretch in front of the front wall. The
+ * offset D (copy at x + D) is the smallest that overlaps no grain already
+ * there: grains near the front (x > F - 4 r_max) against the copy's first
+ * 4 r_max, D >= F - 2 r_max; any other pair is then at least 2 r_max apart. */
+static int append_stretch(dem_window *win, dem_world *w, int *added, double *fraction, cm_error *err)
+{
+    const dem_grains *g = &w->g;
+    const double F = win->st.x_front, rm = win->r_max;
+    int nn = 0;
+    for (int i = 0; i < g->n; i++)
+        if (g->x[i] > F - 4.0 * rm)
+            win->near[nn++] = i;
+    double D = F - 2.0 * rm;
+    for (int j = 0; j < win->n_sample && win->sample[j].x[0] < 4.0 * rm; j++) {
+        const dem_grain_state *s = &win->sample[j];
+        for (int a = 0; a < nn; a++) {
+            int i = win->near[a];
+            double dy = g->y[i] - s->x[1], dz = g->z[i] - s->x[2], rr = g->r[i] + s->radius;
+            double q = rr * rr - dy * dy - dz * dz;
+            if (q > 0.0)
+                D = fmax(D, g->x[i] + sqrt(q) - s->x[0]);
+        }
+    }
+    D += 1e-9; /* touching, not overlapping */
+    double off[3] = {D, 0.0, 0.0};
+    int rc = dem_grains_add_states(w, win->n_sample, win->sample, off, err);
+    if (rc) {
+        cm_fail_prefix(err, "window: appending %d grains at x = %.3f m: ", win->n_sample, D);
+        return rc;
+    }
+    win->st.x_front = D + win->sample_reach;
+    move_wall_x(w, win->st.wall_front, win->st.x_front);
+    *added = win->n_sample;
+    *fraction = slab_fraction(win, w, F - 2.0 * rm, F + 2.0 * rm);
+    return CM_OK;
+}
+
+int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err)
+{
+    const dem_window_def *d = &win->def;
+    dem_window_state *st = &win->st;
+    int changed = 0;
+    if (wheel_x - d->behind - st->x_back >= d->shift) {
+        double cut = wheel_x - d->behind;
+        int removed = 0;
+        dem_grains_remove_below_x(w, cut, &removed);
+        const dem_grains *g = &w->g;
+        double lo = cut;
+        for (int i = 0; i < g->n; i++)
+            lo = fmin(lo, g->x[i] - g->r[i]);
+        st->x_back = lo;
+        move_wall_x(w, st->wall_back, lo);
+        st->shifts_back++;
+        st->removed += removed;
+        changed = 1;
+        cm_log_info("window: wheel at x = %.3f m: removed %d grains behind x = %.3f m, back wall to %.3f m; %d grains",
+                    wheel_x, removed, cut, lo, g->n);
+    }
+    while (st->x_front - wheel_x < d->ahead) {
+        int added = 0;
+        double fraction = 1.0, f_old = st->x_front;
+        int rc = append_stretch(win, w, &added, &fraction, err);
+        if (rc)
+            return rc;
+        st->shifts_front++;
+        st->added += added;
+        st->seam_min_fraction = fmin(st->seam_min_fraction, fraction);
+        changed = 1;
+        cm_log_info("window: wheel at x = %.3f m: appended %d grains (the sample stretch) from x = %.3f m, front wall "
+                    "to %.3f m; seam solid fraction %.0f %% of the sample's; %d grains",
+                    wheel_x, added, f_old, st->x_front, 100.0 * fraction, w->g.n);
+    }
+    if (d->freeze_distance > 0.0 && (changed || !(fabs(wheel_x - st->x_freeze) < win->r_max))) {
+        st->x_freeze = wheel_x;
+        dem_freeze_outside_x(w, wheel_x - d->freeze_distance, wheel_x + d->freeze_distance);
+    }
+    return CM_OK;
+}
+
+int dem_window_check_footprint(const dem_window *win, const dem_world *w, const dem_window_def *def,
+                               double wheel_x, double expected_sinkage)
+{
+    const dem_surface *s = w->surf;
+    if (!s || s->n_nodes == 0)
+        return 0;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int k = 0; k < s->n_nodes; k++)
+        for (int c = 0; c < 3; c++)
+            lo[c] = fmin(lo[c], s->x[3 * k + c]), hi[c] = fmax(hi[c], s->x[3 * k + c]);
+    double R = 0.5 * (hi[2] - lo[2]), z = fmin(expected_sinkage, R);
+    double lc = 2.0 * sqrt(fmax(2.0 * R * z - z * z, 0.0)); /* chord of a circle sunk by z */
+    double b = hi[1] - lo[1];
+    int warnings = 0;
+    cm_log_info("footprint: tire radius %.3f m, width %.3f m, contact length %.3f m at %.1f mm sinkage "
+                "(dem.window.expected_sinkage)",
+                R, b, lc, 1e3 * z);
+    double ahead, behind;
+    const char *k_ahead, *k_behind;
+    if (win) {
+        ahead = def->ahead, behind = def->behind;
+        k_ahead = "dem.window.ahead", k_behind = "dem.window.behind";
+    } else {
+        int kb = find_wall(w, 1, 0), kf = find_wall(w, -1, 0);
+        ahead = kf >= 0 ? w->walls[kf].p[0] - wheel_x : INFINITY;
+        behind = kb >= 0 ? wheel_x - w->walls[kb].p[0] : INFINITY;
+        k_ahead = "dem.bed.box_max[0] (or a dem.window)", k_behind = "wheel.center[0] or dem.bed.box_min[0]";
+    }
+    if (ahead < 1.5 * lc) {
+        cm_log_warn("the bed reaches only %.3f m ahead of the wheel centre%s, less than 1.5 contact lengths (%.3f m): "
+                    "traction reads low in too small a soil bin; raise %s",
+                    ahead, win ? "" : " at its start", 1.5 * lc, k_ahead);
+        warnings++;
+    }
+    if (behind < lc) {
+        cm_log_warn("the bed reaches only %.3f m behind the wheel centre, less than a contact length (%.3f m); raise %s",
+                    behind, lc, k_behind);
+        warnings++;
+    }
+    int ky0 = find_wall(w, 0, 1), ky1 = find_wall(w, 0, -1);
+    double left = ky0 >= 0 ? lo[1] - w->walls[ky0].p[1] : INFINITY;
+    double right = ky1 >= 0 ? w->walls[ky1].p[1] - hi[1] : INFINITY;
+    if (fmin(left, right) < 0.5 * b) {
+        cm_log_warn("the tire runs %.3f m / %.3f m from the bed's side walls, less than half its width (%.3f m): "
+                    "traction reads low in too narrow a soil bin; widen dem.bed.box_min[1] / box_max[1] or centre the "
+                    "wheel (wheel.center[1])",
+                    left, right, 0.5 * b);
+        warnings++;
+    }
+    if (win && def->freeze_distance > 0 && def->freeze_distance < lc) {
+        cm_log_warn("dem.window.freeze_distance = %.3f m is shorter than the contact length (%.3f m): grains under the "
+                    "tire could be frozen; raise dem.window.freeze_distance",
+                    def->freeze_distance, lc);
+        warnings++;
+    }
+    return warnings;
+}

@@ -1,0 +1,64 @@
+/* The terrain window: the second paper's terrain replacement (路面更替法,
+ * Zhao & Zang, sec. 2): the bed follows the wheel along +x with a bounded
+ * number of grains, and grains far from the wheel are frozen.
+ *
+ * The settled bed is the sample. At creation the grains of its interior
+ * stretch [x_min + sample_margin, x_min + sample_margin + shift) (away from
+ * the end walls' flat packing) are saved. Then, every exchange, with the
+ * wheel centre x_c the FEM sends:
+ *   - when x_c - behind has passed the back wall by `shift`, every grain with
+ *     x < x_c - behind is removed and the back wall moves up to the survivors;
+ *   - while the front wall is less than `ahead` in front of x_c, a copy of the
+ *     sample stretch is appended in front of it (offset in x as far back as it
+ *     goes without overlapping a grain) and the front wall moves to its end;
+ *   - with freeze_distance > 0, grains with |x - x_c| > freeze_distance are
+ *     frozen (dem_freeze_outside_x), re-evaluated every time x_c has moved by
+ *     a grain radius.
+ * Each shift is logged with the grains removed/added and the seam's density. */
+#ifndef DEM_WINDOW_H
+#define DEM_WINDOW_H
+
+#include "dem.h"
+
+/* Everything that changes while the window moves (for checkpoints: these
+ * fields plus the world; the sample is re-read from the settled bed, see
+ * dem_window_create). */
+typedef struct dem_window_state {
+    double x_back, x_front;    /* m, planes of the back and front end walls */
+    double x_freeze;           /* m, wheel x at the last freezing update (NAN: none yet) */
+    int wall_back, wall_front; /* indices of the end walls in the world */
+    int shifts_back;           /* removals done */
+    int shifts_front;          /* stretches appended */
+    long removed, added;       /* grains, in total */
+    double seam_min_fraction;  /* lowest solid fraction of a seam slab relative to the sample's, of all seams */
+} dem_window_state;
+
+typedef struct dem_window dem_window;
+
+/* Saves the sample stretch from the grains of w (which must hold the settled
+ * bed and nothing else yet) and finds the end walls (normals +x and -x).
+ * Errors name the dem.window key to change. */
+int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window **out, cm_error *err);
+void dem_window_free(dem_window **win);
+
+/* Footprint check against the trap of a too small soil bin (drawbar pull
+ * 12-43 % low): contact length l = 2 sqrt(2 R z - z^2) from the surface's
+ * radius R (half its z-extent) and the expected sinkage z, tire width b from
+ * its y-extent. Warns (cm_log_warn) naming the key when
+ *   ahead  < 1.5 l   (bed ahead of the wheel centre),
+ *   behind < 1.0 l   (bed behind it),
+ *   side clearance (bed wall to tire side) < b / 2 on either side,
+ *   0 < freeze_distance < l.
+ * win may be NULL (no window: the bed's ends at the wheel's start position
+ * are checked, and `ahead` shrinks as the wheel travels). Returns the number
+ * of warnings. */
+int dem_window_check_footprint(const dem_window *win, const dem_world *w, const dem_window_def *def,
+                               double wheel_x, double expected_sinkage);
+
+/* One exchange's update with the wheel centre's x. */
+int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err);
+
+const dem_window_state *dem_window_get_state(const dem_window *win);
+void dem_window_set_state(dem_window *win, const dem_window_state *st);
+
+#endif

@@ -202,7 +202,7 @@ static int read_window(cm_scene *s, dem_config *c, cm_error *err)
         (rc = cm_scene_double(s, "dem.window.ahead", 1e-6, 1e3, &wd->ahead, err)) ||
         (rc = cm_scene_double(s, "dem.window.shift", 1e-6, 1e3, &wd->shift, err)) ||
         (rc = cm_scene_double_opt(s, "dem.window.sample_margin", 0.0, 1e3, 0.04, &wd->sample_margin, err)) ||
-        (rc = cm_scene_double_opt(s, "dem.window.freeze_distance", 0.0, 1e3, 0.0, &wd->freeze_distance, err)) ||
+        (rc = cm_scene_double_opt(s, "dem.window.freeze_distance", 0.0, 1e3, -1.0, &wd->freeze_distance, err)) ||
         (rc = cm_scene_double_opt(s, "dem.window.expected_sinkage", 0.0, 10.0, 0.03, &wd->expected_sinkage, err)))
         return rc;
     double len = c->bed.box_max[0] - c->bed.box_min[0];

@@ -7,6 +7,12 @@
 #include "dem_world.h"
 #include "log.h"
 #include "test_dem_common.h"
+#include "timer.h"
+
+/* Window vs long bed tolerances (see window_seed_noise): sinkage in m,
+ * horizontal force in N. */
+#define WINDOW_TOL_SINK 0.0025
+#define WINDOW_TOL_FX 12.0
 
 /* Two separate blocks of grains on a floor (x < 0.05 and x > 0.07), let
  * fall and touch for a while so that walls and pairs hold springs. */
@@ -288,11 +294,228 @@ static int frozen_grains(void)
     return 0;
 }
 
+/* ---- a rigid wheel through the window vs a long bed ------------------ */
+
+#define CYL_NT 40 /* segments around */
+#define CYL_NY 4  /* segments across */
+#define CYL_NODES ((CYL_NY + 1) * CYL_NT + 2)
+#define CYL_TRIS (2 * CYL_NY * CYL_NT + 2 * CYL_NT)
+
+/* Closed cylinder, axis along y, radius R, width b, in its own frame
+ * (centre at the origin). */
+static void cylinder_mesh(double R, double b, double *x, int *tri)
+{
+    for (int j = 0; j <= CYL_NY; j++)
+        for (int k = 0; k < CYL_NT; k++) {
+            double a = 2 * M_PI * k / CYL_NT, *p = x + 3 * (j * CYL_NT + k);
+            p[0] = R * cos(a), p[1] = -0.5 * b + b * j / CYL_NY, p[2] = R * sin(a);
+        }
+    int c0 = (CYL_NY + 1) * CYL_NT, c1 = c0 + 1;
+    x[3 * c0] = 0, x[3 * c0 + 1] = -0.5 * b, x[3 * c0 + 2] = 0;
+    x[3 * c1] = 0, x[3 * c1 + 1] = 0.5 * b, x[3 * c1 + 2] = 0;
+    int t = 0;
+    for (int j = 0; j < CYL_NY; j++)
+        for (int k = 0; k < CYL_NT; k++) {
+            int a = j * CYL_NT + k, bb = j * CYL_NT + (k + 1) % CYL_NT, c = a + CYL_NT, d = bb + CYL_NT;
+            int tt[6] = {a, c, bb, bb, c, d};
+            memcpy(tri + 3 * t, tt, sizeof tt);
+            t += 2;
+        }
+    for (int k = 0; k < CYL_NT; k++) {
+        int a = k, bb = (k + 1) % CYL_NT;
+        int t0[3] = {c0, bb, a}, t1[3] = {c1, CYL_NY * CYL_NT + a, CYL_NY * CYL_NT + bb};
+        memcpy(tri + 3 * t++, t0, sizeof t0);
+        memcpy(tri + 3 * t++, t1, sizeof t1);
+    }
+}
+
+typedef struct wheel_result {
+    double fx;        /* N, mean horizontal force of the grains on the wheel over the steady part */
+    double sinkage;   /* m, mean sinkage of the wheel's lowest point below the settled bed's surface */
+    double fx_sd;     /* N, standard deviation of the 2 mm block means of fx */
+    int max_grains;   /* largest grain count during the run */
+    int shifts_back, shifts_front;
+    double seam;      /* lowest seam solid fraction relative to the sample's */
+    double seconds;
+} wheel_result;
+
+/* A rigid wheel (R 0.1 m, 0.06 m wide) on a bed 0.12 m wide, ~4 cm deep, of
+ * grains 6-7 mm, under a vertical load W = 150 N held by a servo on its
+ * height (sink speed 0.2 m/s x (W - F_z) / W, F_z smoothed over 5 ms): set
+ * down for 0.1 s, then driven at 20 % slip, v = 1 m/s, from x = 0.12 m over
+ * 0.3 m. Horizontal force and sinkage averaged from x = 0.2 m on. */
+static int roll_wheel(double bed_len, uint64_t seed, const dem_window_def *wd, wheel_result *res)
+{
+    const double R = 0.1, b = 0.06, v = 1.0, slip = 0.2, omega = v / ((1 - slip) * R), dt = 5e-5;
+    const double x0 = 0.12, travel = 0.3, x_avg = 0.2, load = 150.0, v_servo = 0.2, t_set = 0.1, tau = 0.005;
+    dem_material mats[2] = {test_material(5e7, 0.3, 0.5, 0.6), test_material(5e7, 0.3, 0.5, 0.8)};
+    mats[0].rolling_friction = 0.15;
+    double g[3] = {0, 0, -9.81};
+    dem_world_def d = dem_world_def_default();
+    d.dt = dt;
+    memcpy(d.gravity, g, sizeof g);
+    dem_bed_params p = dem_bed_params_default();
+    double lo[3] = {0, 0, 0}, hi[3] = {bed_len, 0.12, 0.3};
+    memcpy(p.box_min, lo, sizeof lo);
+    memcpy(p.box_max, hi, sizeof hi);
+    p.n_layers = 1;
+    p.layers[0].count = (int)(2500 * bed_len); /* ~4 cm deep */
+    p.layers[0].radius[0] = 0.006, p.layers[0].radius[1] = 0.007;
+    p.seed = seed;
+    p.settle_ke = 1e-6, p.settle_min_time = 0.08, p.settle_max_time = 2.0;
+    d.max_grains = p.layers[0].count * (wd ? 3 : 1);
+    dem_world *w = NULL;
+    cm_error err = {0};
+    ENSURE_MSG(dem_world_create(&d, 2, mats, &w, &err) == 0, "%s", err.msg);
+    bool loaded;
+    double t0 = cm_now();
+    ENSURE_MSG(dem_bed_build(w, &p, NULL, NULL, &loaded, &err) == 0, "%s", err.msg);
+    double h = dem_bed_height(w);
+    dem_window *win = NULL;
+    if (wd)
+        ENSURE_MSG(dem_window_create(w, wd, &win, &err) == 0, "%s", err.msg);
+    static double xr[3 * CYL_NODES], xw[3 * CYL_NODES], vw[3 * CYL_NODES];
+    static int tri[3 * CYL_TRIS];
+    cylinder_mesh(R, b, xr, tri);
+    double c[3] = {x0, 0.06, h + R + 0.002}, angle = 0;
+    for (int k = 0; k < CYL_NODES; k++)
+        for (int a = 0; a < 3; a++)
+            xw[3 * k + a] = xr[3 * k + a] + c[a];
+    ENSURE_MSG(dem_surface_set(w, CYL_NODES, xw, CYL_TRIS, tri, 1, &err) == 0, "%s", err.msg);
+    if (wd)
+        ENSURE(dem_window_check_footprint(win, w, wd, x0, wd->expected_sinkage) == 0);
+    double sum_fx = 0, sum_sink = 0, blk = 0, blk_sum = 0, blk_sq = 0, fz_avg = 0;
+    long n_avg = 0, n_blk = 0, blk_n = 0;
+    res->max_grains = dem_grain_count(w);
+    for (long step = 0;; step++) {
+        int setting = step * dt < t_set;
+        if (!setting && c[0] >= x0 + travel)
+            break;
+        double vx = setting ? 0.0 : v, om = setting ? 0.0 : omega;
+        double vz = -v_servo * fmax(-1.0, fmin(1.0, (load - fz_avg) / load));
+        c[0] += vx * dt, c[2] += vz * dt, angle += om * dt;
+        double ca = cos(angle), sa = sin(angle);
+        for (int k = 0; k < CYL_NODES; k++) {
+            /* rotation about +y by angle: x' = x cos + z sin, z' = -x sin + z cos */
+            const double *q = xr + 3 * k;
+            double rx = q[0] * ca + q[2] * sa, rz = -q[0] * sa + q[2] * ca;
+            xw[3 * k] = c[0] + rx, xw[3 * k + 1] = c[1] + q[1], xw[3 * k + 2] = c[2] + rz;
+            /* v + omega y x r: (om rz, 0, -om rx) */
+            vw[3 * k] = vx + om * rz, vw[3 * k + 1] = 0, vw[3 * k + 2] = vz - om * rx;
+        }
+        ENSURE_MSG(dem_surface_update(w, xw, vw, &err) == 0, "%s", err.msg);
+        if (win && step % 10 == 0)
+            ENSURE_MSG(dem_window_update(win, w, c[0], &err) == 0, "%s", err.msg);
+        ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
+        res->max_grains = fmax(res->max_grains, dem_grain_count(w));
+        dem_surface_total t;
+        dem_surface_totals(w, &t); /* the grains on the wheel */
+        fz_avg += (t.force[2] - fz_avg) * dt / tau;
+        if (!setting && c[0] >= x_avg) {
+            sum_fx += t.force[0], sum_sink += h - (c[2] - R);
+            n_avg++;
+            blk += t.force[0], blk_n++;
+            if (blk_n * v * dt >= 0.002) {
+                blk_sum += blk / blk_n, blk_sq += (blk / blk_n) * (blk / blk_n), n_blk++;
+                blk = 0, blk_n = 0;
+            }
+        }
+    }
+    res->sinkage = sum_sink / n_avg;
+    res->fx = sum_fx / n_avg;
+    double mb = blk_sum / n_blk;
+    res->fx_sd = sqrt(fmax(blk_sq / n_blk - mb * mb, 0.0));
+    res->shifts_back = res->shifts_front = 0, res->seam = 1.0;
+    if (win) {
+        const dem_window_state *st = dem_window_get_state(win);
+        res->shifts_back = st->shifts_back, res->shifts_front = st->shifts_front, res->seam = st->seam_min_fraction;
+    }
+    res->seconds = cm_now() - t0;
+    dem_window_free(&win);
+    dem_world_destroy(&w);
+    return 0;
+}
+
+/* contact length 0.105 m: behind 1 of them, ahead and frozen beyond 2.4 */
+static const dem_window_def wheel_window = {.enabled = true, .behind = 0.11, .ahead = 0.25, .shift = 0.05,
+                                            .sample_margin = 0.03, .freeze_distance = 0.25, .expected_sinkage = 0.015};
+
+static void print_result(const char *what, const wheel_result *r)
+{
+    printf("%-28s Fx %7.2f N (block sd %.2f)  sinkage %5.2f mm  max grains %5d  shifts %d/%d  seam %.2f  %.1f s\n",
+           what, r->fx, r->fx_sd, 1e3 * r->sinkage, r->max_grains, r->shifts_back, r->shifts_front, r->seam,
+           r->seconds);
+}
+
+/* The window against a long bed: same grain statistics, bed settled from
+ * another seed (window: a 0.3 m bed as the sample; long: 0.7 m, never
+ * shifted). Tolerances from window_seed_noise (not in ctest: three long
+ * beds of seeds 1, 2, 3): see the README's terrain window section. */
+static int window_matches_long_bed(void)
+{
+    cm_log_set_quiet(1);
+    wheel_result lng, win;
+    if (roll_wheel(0.7, 1, NULL, &lng) || roll_wheel(0.3, 1, &wheel_window, &win))
+        return 1;
+    print_result("long bed 0.7 m", &lng);
+    print_result("window (0.3 m sample)", &win);
+    ENSURE(win.shifts_back >= 2 && win.shifts_front >= 2);
+    ENSURE_MSG(win.max_grains < 0.75 * lng.max_grains, "window %d grains vs long %d", win.max_grains, lng.max_grains);
+    ENSURE_NEAR(win.sinkage, lng.sinkage, WINDOW_TOL_SINK);
+    ENSURE_NEAR(win.fx, lng.fx, WINDOW_TOL_FX);
+    return 0;
+}
+
+/* The yardstick (run by hand: test_dem_window window_seed_noise): the same
+ * long bed from three seeds. */
+static int window_seed_noise(void)
+{
+    cm_log_set_quiet(1);
+    for (uint64_t seed = 1; seed <= 3; seed++) {
+        wheel_result r;
+        char what[64];
+        if (roll_wheel(0.7, seed, NULL, &r))
+            return 1;
+        snprintf(what, sizeof what, "long bed, seed %d", (int)seed);
+        print_result(what, &r);
+        if (roll_wheel(0.3, seed, &wheel_window, &r))
+            return 1;
+        snprintf(what, sizeof what, "window, seed %d", (int)seed);
+        print_result(what, &r);
+    }
+    return 0;
+}
+
+/* The measurement behind DEM_WINDOW_FREEZE_LENGTHS (run by hand:
+ * test_dem_window freeze_distance_sweep): the long bed, nothing removed nor
+ * added, grains frozen beyond 0.12 .. 0.35 m (1.1 .. 3.3 contact lengths). */
+static int freeze_distance_sweep(void)
+{
+    cm_log_set_quiet(1);
+    dem_window_def fo = wheel_window;
+    fo.behind = 10, fo.ahead = 0.25;
+    const double dists[] = {0.12, 0.18, 0.25, 0.35};
+    for (uint64_t seed = 1; seed <= 2; seed++)
+        for (int k = 0; k < 4; k++) {
+            wheel_result r;
+            fo.freeze_distance = dists[k];
+            if (roll_wheel(0.7, seed, &fo, &r))
+                return 1;
+            char what[64];
+            snprintf(what, sizeof what, "seed %d, frozen beyond %.2f m", (int)seed, dists[k]);
+            print_result(what, &r);
+        }
+    return 0;
+}
+
 static const test_case tests[] = {
     {"remove_compacts", remove_compacts},
     {"add_copies", add_copies},
     {"wall_moves", wall_moves},
     {"frozen_grains", frozen_grains},
+    {"window_matches_long_bed", window_matches_long_bed},
+    {"window_seed_noise", window_seed_noise},
+    {"freeze_distance_sweep", freeze_distance_sweep},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

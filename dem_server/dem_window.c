@@ -137,6 +137,22 @@ static double slab_fraction(const dem_window *win, const dem_world *w, double a,
     return m / ((b - a) * win->line_mass);
 }
 
+/* Largest overlap (fraction of the smaller radius) of the pairs with an
+ * active grain. */
+static double seam_overlap(const dem_world *w)
+{
+    const dem_grains *g = &w->g;
+    double m = 0.0;
+    for (int p = 0; p < w->n_active_pairs; p++) {
+        int i = w->pi[p], j = w->pj[p];
+        double dx = g->x[i] - g->x[j], dy = g->y[i] - g->y[j], dz = g->z[i] - g->z[j];
+        double delta = g->r[i] + g->r[j] - sqrt(dx * dx + dy * dy + dz * dz);
+        if (delta > 0.0)
+            m = fmax(m, delta / fmin(g->r[i], g->r[j]));
+    }
+    return m;
+}
+
 /* Pushes the overlapping grains of a seam apart: everything outside
  * [x_lo, x_hi] frozen, steps with the velocities zeroed after each (a
  * steepest descent of the contact energy, each grain moving F/m dt^2) until
@@ -149,7 +165,6 @@ static int relax_seam(dem_world *w, double x_lo, double x_hi, int *steps, double
     double t = w->time;
     long step = w->step;
     dem_freeze_outside_x(w, x_lo, x_hi);
-    dem_stats st;
     int k = 0, rc = CM_OK;
     for (; k < 400; k++) {
         if ((rc = dem_step(w, err))) {
@@ -161,16 +176,12 @@ static int relax_seam(dem_world *w, double x_lo, double x_hi, int *steps, double
                 g->vx[i] = g->vy[i] = g->vz[i] = g->wx[i] = g->wy[i] = g->wz[i] = 0.0;
                 g->angmom[3 * i] = g->angmom[3 * i + 1] = g->angmom[3 * i + 2] = 0.0;
             }
-        if (k % 10 == 9) {
-            dem_world_stats(w, &st);
-            if (st.max_overlap < 0.01)
-                break;
-        }
+        if (k % 10 == 9 && seam_overlap(w) < 0.01)
+            break;
     }
-    dem_world_stats(w, &st);
     w->time = t, w->step = step;
     *steps = k + 1;
-    *overlap = st.max_overlap;
+    *overlap = seam_overlap(w);
     return rc;
 }
 
@@ -328,7 +339,7 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
     }
     if (win && win->def.freeze_distance > 0 && win->def.freeze_distance < 2.0 * lc) {
         cm_log_warn("dem.window.freeze_distance = %.3f m is shorter than 2 contact lengths (%.3f m): the frozen soil "
-                    "ahead stiffens the bed (measured: +170 %% vertical force at 1.1 contact lengths); raise "
+                    "ahead stiffens the bed (measured: 22-30 %% less sinkage at 1.1 contact lengths); raise "
                     "dem.window.freeze_distance",
                     win->def.freeze_distance, 2.0 * lc);
         warnings++;

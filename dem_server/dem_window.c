@@ -20,6 +20,7 @@ struct dem_window {
     double line_mass;        /* kg/m, grain mass per metre of the stretch */
     double r_max;            /* m, largest radius of the sample bed */
     int *near;               /* world capacity: slots near the front wall (seam search) */
+    double *saved;           /* world capacity x 9: v, omega, L by id, kept over a seam relaxation */
 };
 
 static int cmp_state_x(const void *a, const void *b)
@@ -62,7 +63,8 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
     }
     win->sample = malloc((size_t)(n ? n : 1) * sizeof *win->sample);
     win->near = malloc((size_t)g->cap * sizeof *win->near);
-    if (!win->sample || !win->near) {
+    win->saved = malloc((size_t)g->cap * 9 * sizeof *win->saved);
+    if (!win->sample || !win->near || !win->saved) {
         dem_window_free(&win);
         return cm_fail(err, CM_ERR_NOMEM, "dem.window: out of memory for a sample of %d grains", n);
     }
@@ -113,6 +115,7 @@ void dem_window_free(dem_window **wp)
         return;
     free(win->sample);
     free(win->near);
+    free(win->saved);
     free(win);
     *wp = NULL;
 }
@@ -158,12 +161,26 @@ static double seam_overlap(const dem_world *w)
  * steepest descent of the contact energy, each grain moving F/m dt^2) until
  * no overlap exceeds 1 % of the smaller radius, or 400 steps. The world's
  * clock is put back: this is set-up, not simulated time. *overlap: the
- * largest overlap left (fraction of the radius). The caller re-freezes. */
-static int relax_seam(dem_world *w, double x_lo, double x_hi, int *steps, double *overlap, cm_error *err)
+ * largest overlap left (fraction of the radius). Leaves every grain thawed
+ * (the caller re-freezes). */
+static int relax_seam(dem_window *win, dem_world *w, double x_lo, double x_hi, int *steps, double *overlap,
+                      cm_error *err)
 {
     dem_grains *g = &w->g;
     double t = w->time;
     long step = w->step;
+    /* The rest of the bed only waits: its velocities (by id: a rebuild may
+     * re-sort the slots) are put back afterwards, and the tire is taken
+     * out so that its contacts' springs and node forces stay as they are. */
+    for (int id = 0; id < g->n; id++) {
+        int i = g->slot_of[id];
+        double *sv = win->saved + 9 * (size_t)id;
+        sv[0] = g->vx[i], sv[1] = g->vy[i], sv[2] = g->vz[i];
+        sv[3] = g->wx[i], sv[4] = g->wy[i], sv[5] = g->wz[i];
+        memcpy(sv + 6, g->angmom + 3 * i, 3 * sizeof *sv);
+    }
+    dem_surface *surf = w->surf;
+    w->surf = NULL;
     dem_freeze_outside_x(w, x_lo, x_hi);
     int k = 0, rc = CM_OK;
     for (; k < 400; k++) {
@@ -179,9 +196,20 @@ static int relax_seam(dem_world *w, double x_lo, double x_hi, int *steps, double
         if (k % 10 == 9 && seam_overlap(w) < 0.01)
             break;
     }
+    w->surf = surf;
     w->time = t, w->step = step;
     *steps = k + 1;
     *overlap = seam_overlap(w);
+    dem_freeze_outside_x(w, -INFINITY, INFINITY); /* the caller re-freezes as the window wants */
+    for (int id = 0; id < g->n; id++) {
+        int i = g->slot_of[id];
+        if (g->x[i] >= x_lo && g->x[i] <= x_hi)
+            continue; /* the seam starts at rest */
+        const double *sv = win->saved + 9 * (size_t)id;
+        g->vx[i] = sv[0], g->vy[i] = sv[1], g->vz[i] = sv[2];
+        g->wx[i] = sv[3], g->wy[i] = sv[4], g->wz[i] = sv[5];
+        memcpy(g->angmom + 3 * i, sv + 6, 3 * sizeof *sv);
+    }
     return rc;
 }
 
@@ -230,7 +258,7 @@ static int append_stretch(dem_window *win, dem_world *w, int *added, double *fra
     win->st.x_front = fmax(reach, D + win->len);
     move_wall_x(w, win->st.wall_front, win->st.x_front);
     int steps = 0;
-    int rc = relax_seam(w, D - 3.0 * rm, D + 3.0 * rm, &steps, overlap_left, err);
+    int rc = relax_seam(win, w, D - 3.0 * rm, D + 3.0 * rm, &steps, overlap_left, err);
     if (rc)
         return rc;
     *added = count;
@@ -277,8 +305,6 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
     if (d->freeze_distance > 0.0 && (changed || !(fabs(wheel_x - st->x_freeze) < win->r_max))) {
         st->x_freeze = wheel_x;
         dem_freeze_outside_x(w, wheel_x - d->freeze_distance, wheel_x + d->freeze_distance);
-    } else if (changed && !(d->freeze_distance > 0.0)) {
-        dem_freeze_outside_x(w, -INFINITY, INFINITY); /* the seam relaxation froze the rest */
     }
     return CM_OK;
 }

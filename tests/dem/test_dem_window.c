@@ -6,6 +6,7 @@
 #include "dem_window.h"
 #include "dem_world.h"
 #include "log.h"
+#include "scene.h"
 #include "test_dem_common.h"
 #include "timer.h"
 
@@ -488,6 +489,54 @@ static int window_seed_noise(void)
     return 0;
 }
 
+/* dem.window keys: read, capacity sized from the window, strict errors. */
+static int window_config(void)
+{
+    const char *base = "dem = { dt = 1e-5;\n"
+                       "  materials = ( { name = \"soil\"; density = 2600.0; young = 5e7; poisson = 0.3;\n"
+                       "                  restitution = 0.5; friction = 0.6; } );\n"
+                       "  bed = { box_min = [0.0, 0.0, 0.0]; box_max = [0.5, 0.2, 0.3]; material = \"soil\";\n"
+                       "          layers = ( { count = 5000; radius = [0.004, 0.005]; } ); };\n"
+                       "  %s\n};\n";
+    struct {
+        const char *window;
+        int ok;
+        const char *needle;
+    } cases[] = {
+        {"window = { behind = 0.2; ahead = 0.4; shift = 0.1; freeze_distance = 0.3; expected_sinkage = 0.02; };", 1,
+         NULL},
+        {"window = { behind = 0.2; ahead = 0.4; shift = 0.1; };", 1, NULL},
+        {"window = { behind = 0.2; ahead = 0.4; shift = 0.45; };", 0, "dem.window.shift"},
+        {"window = { behind = 0.2; ahead = 0.4; };", 0, "dem.window.shift"},
+        {"window = { behind = 0.2; ahead = 0.4; shift = 0.1; lenght = 1.0; };", 0, "lenght"},
+    };
+    for (int k = 0; k < TEST_COUNT(cases); k++) {
+        char text[2048];
+        snprintf(text, sizeof text, base, cases[k].window);
+        cm_scene *sc = NULL;
+        cm_error err = {0};
+        ENSURE(cm_scene_open_string(text, "w.cfg", &sc, &err) == 0);
+        dem_config c;
+        int rc = dem_config_read(sc, &c, &err);
+        static const char *const sections[] = {"dem", NULL};
+        if (rc == 0)
+            rc = cm_scene_check_unknown(sc, sections, &err);
+        cm_scene_close(&sc);
+        ENSURE_MSG((rc == 0) == cases[k].ok, "case %d: rc %d: %s", k, rc, err.msg);
+        if (!cases[k].ok) {
+            ENSURE_MSG(strstr(err.msg, cases[k].needle), "case %d: %s", k, err.msg);
+            continue;
+        }
+        ENSURE(c.window.enabled && c.window.behind == 0.2 && c.window.ahead == 0.4 && c.window.shift == 0.1);
+        ENSURE(c.window.sample_margin == 0.04);
+        ENSURE(k == 0 ? c.window.freeze_distance == 0.3 && c.window.expected_sinkage == 0.02
+                      : c.window.freeze_distance < 0 && c.window.expected_sinkage == 0.03);
+        /* 10 000 grains/m x (0.2 + 0.4 + 2 x 0.1 + 2 x 0.04) m x 1.15 + 64 */
+        ENSURE_NEAR(c.world.max_grains, 1.15 * 10000 * 0.88 + 64, 2);
+    }
+    return 0;
+}
+
 /* The measurement behind DEM_WINDOW_FREEZE_LENGTHS (run by hand:
  * test_dem_window freeze_distance_sweep): the long bed, nothing removed nor
  * added, grains frozen beyond 0.12 .. 0.35 m (1.1 .. 3.3 contact lengths). */
@@ -515,6 +564,7 @@ static const test_case tests[] = {
     {"add_copies", add_copies},
     {"wall_moves", wall_moves},
     {"frozen_grains", frozen_grains},
+    {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},
     {"window_seed_noise", window_seed_noise},
     {"freeze_distance_sweep", freeze_distance_sweep},

@@ -94,10 +94,30 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
     win->st.wall_front = kf;
     win->st.x_freeze = NAN;
     win->st.seam_min_fraction = 1.0;
+    /* its surface (mean over columns 2 r_max wide of the highest top, as
+     * dem_bed_height) against the whole bed's, which the FEM gets for the
+     * sinkage: the copies should not shift the reference */
+    double h = 2.0 * win->r_max, tops = 0.0;
+    int ncol = 0;
+    for (double cx = 0.0; cx < len; cx += h)
+        for (double cy = g->n ? w->walls[find_wall(w, 0, 1) >= 0 ? find_wall(w, 0, 1) : 0].p[1] : 0.0;; cy += h) {
+            double top = -INFINITY;
+            int any = 0;
+            for (int q = 0; q < n; q++) {
+                const dem_grain_state *st = &win->sample[q];
+                if (st->x[0] >= cx && st->x[0] < cx + h && st->x[1] >= cy && st->x[1] < cy + h)
+                    top = fmax(top, st->x[2] + st->radius), any = 1;
+            }
+            int ky = find_wall(w, 0, -1);
+            if (any)
+                tops += top, ncol++;
+            if (ky < 0 || cy + h >= w->walls[ky].p[1])
+                break;
+        }
     cm_log_info("window: behind %.3f m, ahead %.3f m, shift %.3f m; sample stretch x in [%.3f, %.3f) m of the bed: %d "
-                "grains (%.1f kg/m)%s",
-                def->behind, def->ahead, def->shift, s0, s0 + len, n, win->line_mass,
-                def->freeze_distance != 0 ? "" : "; no freezing");
+                "grains (%.1f kg/m), surface at z = %.4f m (whole bed %.4f m)%s",
+                def->behind, def->ahead, def->shift, s0, s0 + len, n, win->line_mass, ncol ? tops / ncol : NAN,
+                dem_bed_height(w), def->freeze_distance != 0 ? "" : "; no freezing");
     if (def->freeze_distance > 0)
         cm_log_info("window: grains farther than %.3f m from the wheel centre (along x) are frozen",
                     def->freeze_distance);
@@ -159,7 +179,10 @@ static double seam_overlap(const dem_world *w)
 /* Pushes the overlapping grains of a seam apart: everything outside
  * [x_lo, x_hi] frozen, steps with the velocities zeroed after each (a
  * steepest descent of the contact energy, each grain moving F/m dt^2) until
- * no overlap exceeds 1 % of the smaller radius, or 400 steps. The world's
+ * no overlap exceeds 1 % of the smaller radius, or 400 steps. Stopping a
+ * grain only when its force works against its motion (FIRE-like) relaxed
+ * further but let the seam slump under gravity: the rigid wheel sank 1.7 mm
+ * (12 %) deeper than on the long bed instead of 0.8 mm. The world's
  * clock is put back: this is set-up, not simulated time. *overlap: the
  * largest overlap left (fraction of the radius). Leaves every grain thawed
  * (the caller re-freezes). */
@@ -203,8 +226,11 @@ static int relax_seam(dem_window *win, dem_world *w, double x_lo, double x_hi, i
     dem_freeze_outside_x(w, -INFINITY, INFINITY); /* the caller re-freezes as the window wants */
     for (int id = 0; id < g->n; id++) {
         int i = g->slot_of[id];
-        if (g->x[i] >= x_lo && g->x[i] <= x_hi)
-            continue; /* the seam starts at rest */
+        if (g->x[i] >= x_lo && g->x[i] <= x_hi) {
+            g->vx[i] = g->vy[i] = g->vz[i] = g->wx[i] = g->wy[i] = g->wz[i] = 0.0; /* the seam starts at rest */
+            g->angmom[3 * i] = g->angmom[3 * i + 1] = g->angmom[3 * i + 2] = 0.0;
+            continue;
+        }
         const double *sv = win->saved + 9 * (size_t)id;
         g->vx[i] = sv[0], g->vy[i] = sv[1], g->vz[i] = sv[2];
         g->wx[i] = sv[3], g->wy[i] = sv[4], g->wz[i] = sv[5];

@@ -115,6 +115,36 @@ int dem_grain_get(const dem_world *w, int id, dem_grain_state *s);
 /* Sets position, velocity and angular velocity (the rest of s is ignored). */
 int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], const double omega[3]);
 
+/* ---- Removing and adding grains (the terrain window) ----------------- */
+
+/* Ids and tags. An id is a grain's index in the API: dense, 0 .. count-1, in
+ * order of addition. Removing grains renumbers the survivors keeping their
+ * order (id k becomes k minus the number of removed grains of smaller id).
+ * A tag is given once at addition (0, 1, 2, ... over the world's life) and
+ * never changes nor is reused: the output writes it, so that a grain can be
+ * followed across removals, and the grain-grain contact history is keyed by
+ * it. Without removals tag = id. */
+int dem_grain_tag(const dem_world *w, int id);
+/* Removes every grain whose centre has x < x_cut; *removed (may be NULL)
+ * receives how many. The arrays are compacted in place (no allocation), the
+ * removed grains' wall, surface and pair springs go with them, the survivors'
+ * springs stay, and the neighbour list is rebuilt before the next pair step. */
+int dem_grains_remove_below_x(dem_world *w, double x_cut, int *removed);
+/* Removes the grains of the n listed ids (ids as before the call; repeats
+ * are ignored). CM_ERR_RANGE for an id out of range, nothing removed then. */
+int dem_grains_remove(dem_world *w, int n, const int *ids, cm_error *err);
+/* Adds n grains copied from saved states (dem_grain_get): position plus
+ * offset (may be NULL), velocity, angular velocity, orientation, radius or
+ * shape and scale, material. All or none: fails if the world has no room. */
+int dem_grains_add_states(dem_world *w, int n, const dem_grain_state *s, const double offset[3], cm_error *err);
+
+/* Frozen grains: every grain whose centre has x < x_lo or x > x_hi is frozen
+ * (velocities zeroed, no longer integrated, its contacts with other frozen
+ * grains skipped at no cost; an active grain still feels a frozen one), the
+ * others are thawed. The neighbour list is rebuilt when the set changes.
+ * Returns the number frozen. (-INFINITY, INFINITY) thaws all. */
+int dem_freeze_outside_x(dem_world *w, double x_lo, double x_hi);
+
 /* ---- Non-spherical grains ------------------------------------------- */
 
 /* A grain class: convex shape in its own frame (m). The world stores it in its
@@ -169,6 +199,12 @@ int dem_grain_set_orientation(dem_world *w, int id, const double q[4]);
 
 /* An infinite plane through `point`; grains live on the side `normal` points to. */
 int dem_wall_add(dem_world *w, const double point[3], const double normal[3], int material, cm_error *err);
+int dem_wall_count(const dem_world *w);
+/* Point and unit normal of wall k (CM_ERR_RANGE if there is none). */
+int dem_wall_get(const dem_world *w, int k, double point[3], double normal[3]);
+/* Moves wall k to pass through `point` (normal unchanged; the grains'
+ * tangential springs on it are kept). */
+int dem_wall_move(dem_world *w, int k, const double point[3]);
 
 /* ---- Triangle surface (the FE tire) ----------------------------------- */
 
@@ -220,6 +256,7 @@ typedef struct dem_stats {
     double time;          /* s */
     long step;
     int grains;
+    int frozen;           /* grains frozen by dem_freeze_outside_x */
     double ke_trans;      /* J */
     double ke_rot;        /* J */
     double pe_grav;       /* J, -m g.x summed */
@@ -328,6 +365,19 @@ typedef struct dem_wall_def {
     int material;
 } dem_wall_def;
 
+/* The terrain window (dem.window; dem_window.h): the second paper's terrain
+ * replacement, the bed follows the wheel along +x. */
+typedef struct dem_window_def {
+    bool enabled;
+    double behind;           /* m: grains farther than this behind the wheel centre are removed */
+    double ahead;            /* m: the bed is kept at least this long ahead of the wheel centre */
+    double shift;            /* m: removal happens in steps of this; length of each appended stretch */
+    double sample_margin;    /* m: the appended stretch is taken this far inside the bed's end walls */
+    double freeze_distance;  /* m: grains farther than this from the wheel centre (along x) are frozen; 0 = never,
+                              * < 0 = DEM_WINDOW_FREEZE_LENGTHS contact lengths (dem_window.h) */
+    double expected_sinkage; /* m: for the footprint check at start */
+} dem_window_def;
+
 typedef struct dem_config {
     dem_world_def world;
     int n_materials;
@@ -340,6 +390,7 @@ typedef struct dem_config {
     char output_dir[1024]; /* "" = no output */
     int output_every;      /* steps between grain frames */
     int series_every;      /* steps between time-series lines */
+    dem_window_def window;
 } dem_config;
 
 /* Reads the `dem = { ... }` section (only that one) of a scene. */

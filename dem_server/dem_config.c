@@ -183,6 +183,37 @@ static int read_bed(cm_scene *s, dem_config *c, cm_error *err)
     return CM_OK;
 }
 
+/* dem.window = { behind; ahead; shift; sample_margin; freeze_distance; expected_sinkage; } */
+static int read_window(cm_scene *s, dem_config *c, cm_error *err)
+{
+    dem_window_def *wd = &c->window;
+    wd->expected_sinkage = 0.03;
+    if (!cm_scene_has(s, "dem.window"))
+        return CM_OK;
+    if (!c->has_bed)
+        return cm_fail(err, CM_ERR_KEY, "%s: dem.window needs dem.bed (the settled bed is the window's sample)",
+                       cm_scene_path(s));
+    if (!c->bed.side_walls)
+        return cm_fail(err, CM_ERR_KEY, "%s: dem.window moves the bed's end walls: set dem.bed.side_walls = true",
+                       cm_scene_path(s));
+    wd->enabled = true;
+    int rc;
+    if ((rc = cm_scene_double(s, "dem.window.behind", 0.0, 1e3, &wd->behind, err)) ||
+        (rc = cm_scene_double(s, "dem.window.ahead", 1e-6, 1e3, &wd->ahead, err)) ||
+        (rc = cm_scene_double(s, "dem.window.shift", 1e-6, 1e3, &wd->shift, err)) ||
+        (rc = cm_scene_double_opt(s, "dem.window.sample_margin", 0.0, 1e3, 0.04, &wd->sample_margin, err)) ||
+        (rc = cm_scene_double_opt(s, "dem.window.freeze_distance", 0.0, 1e3, -1.0, &wd->freeze_distance, err)) ||
+        (rc = cm_scene_double_opt(s, "dem.window.expected_sinkage", 0.0, 10.0, 0.03, &wd->expected_sinkage, err)))
+        return rc;
+    double len = c->bed.box_max[0] - c->bed.box_min[0];
+    if (wd->shift > len - 2 * wd->sample_margin)
+        return cm_fail(err, CM_ERR_RANGE,
+                       "%s: dem.window.shift = %g m is longer than the bed's interior (dem.bed length %g m minus 2 x "
+                       "dem.window.sample_margin = %g m), from which each stretch is copied",
+                       cm_scene_path(s), wd->shift, len, wd->sample_margin);
+    return CM_OK;
+}
+
 int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
 {
     memset(c, 0, sizeof *c);
@@ -222,7 +253,20 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
         for (int k = 0; k < c->bed.n_layers; k++)
             bed_count += c->bed.layers[k].count;
     }
-    d->max_grains = (int)(max_grains > 0 ? max_grains : (bed_count > 0 ? bed_count : 1000));
+    if ((rc = read_window(s, c, err)))
+        return rc;
+    long need = bed_count;
+    if (c->window.enabled) {
+        /* The bed spans at most behind + shift (removal lags by one shift)
+         * + ahead + shift (one appended stretch) + seam gaps: sized once here,
+         * no allocation while the window moves (15 % for density scatter). */
+        const dem_window_def *wd = &c->window;
+        double len = c->bed.box_max[0] - c->bed.box_min[0];
+        double span = wd->behind + wd->ahead + 2.0 * wd->shift + 2.0 * wd->sample_margin;
+        long win = (long)(1.15 * (double)bed_count * span / len) + 64;
+        need = win > bed_count ? win : bed_count;
+    }
+    d->max_grains = (int)(max_grains > 0 ? max_grains : (need > 0 ? need : 1000));
     if (d->max_grains < bed_count)
         return cm_fail(err, CM_ERR_RANGE, "%s: dem.max_grains = %ld is smaller than the bed's %ld grains",
                        cm_scene_path(s), max_grains, bed_count);

@@ -111,6 +111,16 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     const double origin[3] = {0, 0, 0}, travel[3] = {1, 0, 0};
     dem_surface_set_frame(w, origin, travel);
     cm_log_info("surface: %u nodes, %u triangles from fem_server", c.nn, nt);
+    {
+        /* the wheel centre's x before the first frame: middle of the surface */
+        double xlo = INFINITY, xhi = -INFINITY;
+        for (uint32_t k = 0; k < c.nn; k++)
+            xlo = fmin(xlo, c.x[3 * k]), xhi = fmax(xhi, c.x[3 * k]);
+        double xc = 0.5 * (xlo + xhi);
+        dem_window_check_footprint(def->window, w, &def->window_def, xc, def->window_def.expected_sinkage);
+        if (def->window && (rc = dem_window_update(def->window, w, xc, err)))
+            goto done;
+    }
 
     const int k_steps = def->exchange_every;
     const double interval = def->dt * k_steps;
@@ -178,6 +188,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if ((rc = ipc_recv(c.ch, &in, &q)))
             break;
         uint32_t kind = in->kind;
+        double wheel_x = in->info[IPC_INFO_CENTER_X];
         stop_requested |= (in->flags & IPC_FLAG_STOP_REQUEST) != 0;
         if (kind == IPC_FRAME_DATA) {
             memcpy(c.x, q, m * sizeof *c.x);
@@ -193,6 +204,9 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if ((rc = dem_surface_update(w, c.x, c.v, err)))
             goto done;
         time += interval;
+        /* between two steps: grains at x(t), the next force sum starts after */
+        if (def->window && isfinite(wheel_x) && (rc = dem_window_update(def->window, w, wheel_x, err)))
+            goto done;
 
         if (hooks && hooks->after_exchange && (rc = hooks->after_exchange(w, hooks->user, n, err)))
             goto done;

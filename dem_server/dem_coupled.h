@@ -6,6 +6,7 @@
 #include <signal.h>
 
 #include "dem.h"
+#include "dem_window.h"
 #include "ipc.h"
 
 /* Status returned when the exchange or the peer failed (exit code 3). */
@@ -24,6 +25,8 @@ typedef struct dem_coupled_def {
     double bed_height;      /* m, undisturbed bed surface, sent for sinkage (0 = none) */
     double bed_top;         /* m, highest grain top z + r, sent for placing the wheel (0 = none) */
     volatile sig_atomic_t *stop_flag;
+    dem_window *window;     /* terrain window moved with the wheel every exchange (NULL = none) */
+    dem_window_def window_def; /* its keys (also the footprint check's expected sinkage without a window) */
 } dem_coupled_def;
 
 typedef struct dem_coupled_hooks {

@@ -23,6 +23,7 @@
 
 #include "dem.h"
 #include "dem_coupled.h"
+#include "dem_window.h"
 #include "log.h"
 #include "runcfg.h"
 #include "scene.h"
@@ -130,6 +131,7 @@ static int run(const options *o)
     cm_scene *scene = NULL;
     dem_world *w = NULL;
     ipc_channel *ch = NULL;
+    dem_window *window = NULL;
     output_ctx octx = {0};
     cm_run_config rcfg;
     dem_config cfg;
@@ -190,6 +192,9 @@ static int run(const options *o)
         }
         cm_log_info("%s bed of %d grains, surface at z = %.4f m (%.1f s)", loaded ? "loaded" : "settled",
                     dem_grain_count(w), bed_height, cm_now() - t0);
+        /* the settled bed is the window's sample: taken before anything else is added */
+        if (cfg.window.enabled && !o->standalone && (rc = dem_window_create(w, &cfg.window, &window, &err)))
+            goto fail;
     }
     if ((rc = add_listed_grains(scene, &cfg, w, &err)))
         goto fail;
@@ -231,6 +236,8 @@ static int run(const options *o)
     } else {
         def.bed_height = bed_height;
         def.bed_top = bed_top;
+        def.window = window;
+        def.window_def = cfg.window;
         dem_coupled_hooks hooks = {.after_exchange = after_exchange, .user = &octx};
         rc = dem_run_coupled(w, ch, &def, &hooks, &err);
         ch = NULL; /* closed by the run */
@@ -242,6 +249,13 @@ static int run(const options *o)
         if (rc)
             goto fail;
         exit_code = 0;
+        if (window) {
+            const dem_window_state *ws = dem_window_get_state(window);
+            cm_log_info("window: %d removals (%ld grains), %d stretches appended (%ld grains), lowest seam solid "
+                        "fraction %.0f %% of the sample's; bed now x in [%.3f, %.3f] m",
+                        ws->shifts_back, ws->removed, ws->shifts_front, ws->added, 100.0 * ws->seam_min_fraction,
+                        ws->x_back, ws->x_front);
+        }
     }
     dem_stats s;
     dem_world_stats(w, &s);
@@ -256,6 +270,7 @@ fail:
 cleanup:
     ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
     dem_output_close(&octx.out);
+    dem_window_free(&window);
     dem_world_destroy(&w);
     cm_scene_close(&scene);
     return exit_code;

@@ -45,7 +45,8 @@ int dem_output_open(const char *dir, dem_output **out, cm_error *err)
         free(o);
         return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
     }
-    fprintf(o->series, "time_s,step,ke_trans_J,ke_rot_J,contacts_grain,contacts_wall,contacts_surface,max_overlap\n");
+    fprintf(o->series,
+            "time_s,step,ke_trans_J,ke_rot_J,contacts_grain,contacts_wall,contacts_surface,max_overlap,grains,frozen\n");
     *out = o;
     return CM_OK;
 }
@@ -88,6 +89,9 @@ static int write_xdmf(const dem_output *o, cm_error *err)
                    "</DataItem>\n    </Attribute>\n", n, k);
         fprintf(f, "    <Attribute Name=\"contacts\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
                    "Dimensions=\"%d\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">dem_grains.h5:/frame_%06d/contacts"
+                   "</DataItem>\n    </Attribute>\n", n, k);
+        fprintf(f, "    <Attribute Name=\"tag\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
+                   "Dimensions=\"%d\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">dem_grains.h5:/frame_%06d/tag"
                    "</DataItem>\n    </Attribute>\n   </Grid>\n", n, k);
     }
     fprintf(f, "  </Grid>\n </Domain>\n</Xdmf>\n");
@@ -113,9 +117,9 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
         o->cap_frames = cap;
     }
     double *buf = malloc((size_t)n * 9 * sizeof *buf), *rad = malloc((size_t)n * sizeof *rad);
-    int *cnt = malloc((size_t)n * sizeof *cnt);
+    int *cnt = malloc((size_t)n * sizeof *cnt), *tag = malloc((size_t)n * sizeof *tag);
     int rc = CM_OK;
-    if (!buf || !rad || !cnt) {
+    if (!buf || !rad || !cnt || !tag) {
         rc = cm_fail(err, CM_ERR_NOMEM, "output frame %d: out of memory", o->n_frames);
         goto done;
     }
@@ -126,6 +130,7 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
         b[3] = g->vx[i], b[4] = g->vy[i], b[5] = g->vz[i];
         b[6] = g->wx[i], b[7] = g->wy[i], b[8] = g->wz[i];
         rad[id] = g->r[i];
+        tag[id] = g->tag[i]; /* follows a grain across the terrain window's removals (ids are renumbered) */
     }
     dem_grain_contact_counts(w, cnt);
     double *blk = malloc((size_t)n * 3 * sizeof *blk);
@@ -145,7 +150,8 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
         bad = write_ds(grp, names[a], H5T_NATIVE_DOUBLE, n, 3, blk);
     }
     if (!bad)
-        bad = write_ds(grp, "radius", H5T_NATIVE_DOUBLE, n, 1, rad) || write_ds(grp, "contacts", H5T_NATIVE_INT, n, 1, cnt);
+        bad = write_ds(grp, "radius", H5T_NATIVE_DOUBLE, n, 1, rad) || write_ds(grp, "contacts", H5T_NATIVE_INT, n, 1, cnt) ||
+              write_ds(grp, "tag", H5T_NATIVE_INT, n, 1, tag);
     if (!bad) {
         hid_t sp = H5Screate(H5S_SCALAR);
         hid_t at = H5Acreate2(grp, "time", H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
@@ -166,7 +172,7 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
     o->n_frames++;
     rc = write_xdmf(o, err);
 done:
-    free(buf), free(rad), free(cnt);
+    free(buf), free(rad), free(cnt), free(tag);
     return rc;
 }
 
@@ -174,8 +180,8 @@ int dem_output_series(dem_output *o, const dem_world *w, cm_error *err)
 {
     dem_stats s;
     dem_world_stats(w, &s);
-    if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g\n", s.time, s.step, s.ke_trans, s.ke_rot, s.contacts_gg,
-                s.contacts_gw, s.contacts_gs, s.max_overlap) < 0 ||
+    if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g,%d,%d\n", s.time, s.step, s.ke_trans, s.ke_rot,
+                s.contacts_gg, s.contacts_gw, s.contacts_gs, s.max_overlap, s.grains, s.frozen) < 0 ||
         fflush(o->series) != 0)
         return cm_fail(err, CM_ERR_IO, "%s/dem_series.csv: write failed", o->dir);
     return CM_OK;

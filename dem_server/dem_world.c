@@ -112,6 +112,8 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
     g->id = xcalloc((size_t)cap, sizeof(int), &bad);
     g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->tag = xcalloc((size_t)cap, sizeof(int), &bad);
+    g->frozen = xcalloc((size_t)cap, 1, &bad);
     g->surf_count = xcalloc((size_t)cap, sizeof(int), &bad);
     g->shape = xcalloc((size_t)cap, sizeof(int), &bad);
     g->sc = xcalloc((size_t)cap, sizeof(double), &bad);
@@ -147,6 +149,8 @@ void dem_world_destroy(dem_world **wp)
     free(g->wall_mask);
     free(g->id);
     free(g->slot_of);
+    free(g->tag);
+    free(g->frozen);
     free(g->surf_count);
     free(g->shape);
     free(g->sc);
@@ -206,9 +210,14 @@ int dem_grain_add(dem_world *w, const double x[3], double radius, int material, 
     g->q[4 * i] = 1.0, g->q[4 * i + 1] = g->q[4 * i + 2] = g->q[4 * i + 3] = 0.0;
     g->id[i] = i;
     g->slot_of[i] = i;
+    g->tag[i] = w->next_tag++;
+    g->frozen[i] = 0;
     memset(g->wall_hist + (size_t)i * w->wall_stride * 3, 0, (size_t)w->wall_stride * 3 * sizeof(double));
     g->wall_mask[i] = 0;
     g->surf_count[i] = 0;
+    if (w->surf) /* the slot may have held a removed grain */
+        memset(w->surf->hist + (size_t)i * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE, 0,
+               DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE * sizeof *w->surf->hist);
     g->shape[i] = -1;
     g->sc[i] = 1.0;
     for (int k = 0; k < 3; k++) {
@@ -364,7 +373,7 @@ void dem_grains_permute(dem_world *w, const int *order)
         memcpy(dbl[k], tmp, (size_t)n * sizeof *tmp);
     }
     int *itmp = (int *)tmp;
-    int *ints[] = {g->mat, g->id, g->surf_count, g->shape};
+    int *ints[] = {g->mat, g->id, g->surf_count, g->shape, g->tag};
     for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++) {
         for (int i = 0; i < n; i++)
             itmp[i] = ints[k][order[i]];
@@ -374,6 +383,10 @@ void dem_grains_permute(dem_world *w, const int *order)
     for (int i = 0; i < n; i++)
         utmp[i] = g->wall_mask[order[i]];
     memcpy(g->wall_mask, utmp, (size_t)n * sizeof *utmp);
+    unsigned char *btmp = (unsigned char *)tmp;
+    for (int i = 0; i < n; i++)
+        btmp[i] = g->frozen[order[i]];
+    memcpy(g->frozen, btmp, (size_t)n);
     for (int i = 0; i < n; i++)
         memcpy(tmp + 4 * i, g->q + 4 * order[i], 4 * sizeof *tmp);
     memcpy(g->q, tmp, 4 * (size_t)n * sizeof *tmp);
@@ -397,6 +410,137 @@ void dem_grains_permute(dem_world *w, const int *order)
         g->slot_of[g->id[i]] = i;
 }
 
+/* ---- removing and adding grains ---------------------------------------- */
+
+int dem_grain_tag(const dem_world *w, int id)
+{
+    if (id < 0 || id >= w->g.n)
+        return -1;
+    return w->g.tag[w->g.slot_of[id]];
+}
+
+/* Compacts the grain arrays to the slots with keep[slot] != 0, in place and
+ * in slot order (the destination never passes the source). Survivors get
+ * dense ids in their old id order; every per-grain side array moves along.
+ * keep and the id map live in w->scratch (no allocation). */
+static int grains_compact(dem_world *w, const unsigned char *keep)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n;
+    int *new_id = (int *)(w->scratch + g->cap); /* scratch: >= 4 doubles per grain, keep uses the first cap bytes */
+    int next = 0;
+    for (int id = 0; id < n; id++)
+        new_id[id] = keep[g->slot_of[id]] ? next++ : -1;
+    if (next == n)
+        return 0;
+    double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
+                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
+    int *ints[] = {g->mat, g->surf_count, g->shape, g->tag};
+    const size_t wh = (size_t)w->wall_stride * 3, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+    int d = 0;
+    for (int i = 0; i < n; i++) {
+        if (!keep[i]) {
+            w->n_shaped -= g->shape[i] >= 0;
+            w->n_frozen -= g->frozen[i] != 0;
+            continue;
+        }
+        g->id[d] = new_id[g->id[i]];
+        if (d != i) {
+            for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+                dbl[k][d] = dbl[k][i];
+            for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++)
+                ints[k][d] = ints[k][i];
+            g->wall_mask[d] = g->wall_mask[i];
+            g->frozen[d] = g->frozen[i];
+            memcpy(g->q + 4 * d, g->q + 4 * i, 4 * sizeof *g->q);
+            memcpy(g->inertia + 3 * d, g->inertia + 3 * i, 3 * sizeof *g->inertia);
+            memcpy(g->angmom + 3 * d, g->angmom + 3 * i, 3 * sizeof *g->angmom);
+            memcpy(g->wall_hist + wh * d, g->wall_hist + wh * i, wh * sizeof *g->wall_hist);
+            if (w->surf)
+                memcpy(w->surf->hist + sh * d, w->surf->hist + sh * i, sh * sizeof *w->surf->hist);
+        }
+        d++;
+    }
+    for (int i = 0; i < d; i++)
+        g->slot_of[g->id[i]] = i;
+    g->n = d;
+    /* The pair list names old slots: empty it and rebuild before the next
+     * pair step. The history table stays keyed by tags, so the survivors'
+     * springs carry over and the removed grains' ones are dropped. */
+    w->n_pairs = w->n_active_pairs = 0;
+    w->need_rebuild = 1;
+    return n - d;
+}
+
+int dem_grains_remove_below_x(dem_world *w, double x_cut, int *removed)
+{
+    dem_grains *g = &w->g;
+    unsigned char *keep = (unsigned char *)w->scratch;
+    for (int i = 0; i < g->n; i++)
+        keep[i] = !(g->x[i] < x_cut);
+    int r = grains_compact(w, keep);
+    if (removed)
+        *removed = r;
+    return CM_OK;
+}
+
+int dem_grains_remove(dem_world *w, int n, const int *ids, cm_error *err)
+{
+    dem_grains *g = &w->g;
+    for (int k = 0; k < n; k++)
+        if (ids[k] < 0 || ids[k] >= g->n)
+            return cm_fail(err, CM_ERR_RANGE, "dem_grains_remove: id %d (of %d grains)", ids[k], g->n);
+    unsigned char *keep = (unsigned char *)w->scratch;
+    memset(keep, 1, (size_t)g->n);
+    for (int k = 0; k < n; k++)
+        keep[g->slot_of[ids[k]]] = 0;
+    grains_compact(w, keep);
+    return CM_OK;
+}
+
+int dem_grains_add_states(dem_world *w, int n, const dem_grain_state *s, const double offset[3], cm_error *err)
+{
+    dem_grains *g = &w->g;
+    if (n < 0 || g->n + n > g->cap)
+        return cm_fail(err, CM_ERR_RANGE, "adding %d grains to %d: world is full (max_grains = %d)", n, g->n, g->cap);
+    const double zero[3] = {0, 0, 0};
+    const double *off = offset ? offset : zero;
+    for (int k = 0; k < n; k++) {
+        const dem_grain_state *st = &s[k];
+        double x[3] = {st->x[0] + off[0], st->x[1] + off[1], st->x[2] + off[2]};
+        int id, rc = st->shape >= 0 ? dem_grain_add_shape(w, x, st->q, st->shape, st->scale, st->material, &id, err)
+                                    : dem_grain_add(w, x, st->radius, st->material, &id, err);
+        if (rc)
+            return rc;
+        if (st->shape < 0)
+            dem_grain_set_orientation(w, id, st->q);
+        dem_grain_set(w, id, NULL, st->v, st->w);
+    }
+    return CM_OK;
+}
+
+int dem_freeze_outside_x(dem_world *w, double x_lo, double x_hi)
+{
+    dem_grains *g = &w->g;
+    int frozen = 0, changed = 0;
+    for (int i = 0; i < g->n; i++) {
+        unsigned char f = g->x[i] < x_lo || g->x[i] > x_hi;
+        if (f != g->frozen[i]) {
+            changed = 1;
+            g->frozen[i] = f;
+            if (f) { /* it stays put: no velocity for the dashpots of its active neighbours to see */
+                g->vx[i] = g->vy[i] = g->vz[i] = g->wx[i] = g->wy[i] = g->wz[i] = 0.0;
+                g->angmom[3 * i] = g->angmom[3 * i + 1] = g->angmom[3 * i + 2] = 0.0;
+            }
+        }
+        frozen += f;
+    }
+    w->n_frozen = frozen;
+    if (changed)
+        w->need_rebuild = 1;
+    return frozen;
+}
+
 /* ---- walls ------------------------------------------------------------- */
 
 int dem_wall_add(dem_world *w, const double point[3], const double normal[3], int material, cm_error *err)
@@ -415,6 +559,25 @@ int dem_wall_add(dem_world *w, const double point[3], const double normal[3], in
     v3_store(wl->n, v3_scale(n, 1.0 / nn));
     wl->material = material;
     w->prepared = 0;
+    return CM_OK;
+}
+
+int dem_wall_count(const dem_world *w) { return w->n_walls; }
+
+int dem_wall_get(const dem_world *w, int k, double point[3], double normal[3])
+{
+    if (k < 0 || k >= w->n_walls)
+        return CM_ERR_RANGE;
+    memcpy(point, w->walls[k].p, 3 * sizeof *point);
+    memcpy(normal, w->walls[k].n, 3 * sizeof *normal);
+    return CM_OK;
+}
+
+int dem_wall_move(dem_world *w, int k, const double point[3])
+{
+    if (k < 0 || k >= w->n_walls || !isfinite(point[0]) || !isfinite(point[1]) || !isfinite(point[2]))
+        return CM_ERR_RANGE;
+    memcpy(w->walls[k].p, point, sizeof w->walls[k].p);
     return CM_OK;
 }
 
@@ -742,6 +905,25 @@ static int neighbour_rebuild(dem_world *w, cm_error *err)
             }
         }
     }
+    /* frozen-frozen pairs to the end of the list: the narrow phase stops at
+     * n_active_pairs, their springs stay in the history untouched */
+    int na = w->n_pairs;
+    if (w->n_frozen > 0) {
+        int lo = 0, hi = w->n_pairs - 1;
+        for (;;) {
+            while (lo <= hi && !(g->frozen[w->pi[lo]] && g->frozen[w->pj[lo]]))
+                lo++;
+            while (lo <= hi && g->frozen[w->pi[hi]] && g->frozen[w->pj[hi]])
+                hi--;
+            if (lo >= hi)
+                break;
+            int ti = w->pi[lo], tj = w->pj[lo];
+            w->pi[lo] = w->pi[hi], w->pj[lo] = w->pj[hi];
+            w->pi[hi] = ti, w->pj[hi] = tj;
+        }
+        na = lo;
+    }
+    w->n_active_pairs = na;
     /* history: every candidate pair is entered in the other table, its
      * spring carried over from the previous list when the pair was known */
     dem_hash *old = &w->hist[w->hist_cur], *nw = &w->hist[1 - w->hist_cur];
@@ -750,7 +932,7 @@ static int neighbour_rebuild(dem_world *w, cm_error *err)
     if (dem_hash_reset(nw, w->n_pairs))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     for (int p = 0; p < w->n_pairs; p++) {
-        uint64_t key = dem_pair_key(g->id[w->pi[p]], g->id[w->pj[p]]);
+        uint64_t key = dem_pair_key(g->tag[w->pi[p]], g->tag[w->pj[p]]); /* tags survive removals */
         nw->row[dem_hash_insert(nw, key)] = p;
         int o = dem_hash_find(old, key);
         if (o >= 0)
@@ -820,6 +1002,8 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
         /* gravity, eq. 1 */
         g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
         g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
+        if (g->frozen[i]) /* stays put: its wall springs wait unchanged */
+            continue;
         double r = g->r[i];
         uint32_t mask = g->wall_mask[i];
         for (int k = 0; k < nw; k++) {
@@ -966,7 +1150,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
      * sums are the same for a given thread count */
     double t0 = cm_now();
     int contacts = 0;
-    const int np = w->n_pairs;
+    const int np = w->n_active_pairs;
     const int shaped = w->n_shaped > 0;
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
@@ -1026,6 +1210,8 @@ int dem_step_grains(dem_world *w, cm_error *err)
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(max : maxd2) reduction(min : bad)
 #endif
     for (int i = 0; i < n; i++) {
+        if (g->frozen[i])
+            continue;
         double im = g->inv_m[i], ii = g->inv_i[i];
         g->vx[i] += g->fx[i] * im * dt;
         g->vy[i] += g->fy[i] * im * dt;
@@ -1064,7 +1250,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
 #pragma omp parallel for num_threads(nt) schedule(static)
 #endif
         for (int i = 0; i < n; i++) {
-            if (g->shape[i] < 0)
+            if (g->shape[i] < 0 || g->frozen[i])
                 continue;
             double *L = g->angmom + 3 * i, *q = g->q + 4 * i, om[3];
             memcpy(q, qsave + 4 * i, 4 * sizeof *q);
@@ -1106,6 +1292,7 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     s->time = w->time;
     s->step = w->step;
     s->grains = g->n;
+    s->frozen = w->n_frozen;
     vec3 grav = v3_load(w->def.gravity);
     for (int i = 0; i < g->n; i++) {
         double m = 1.0 / g->inv_m[i], I = 1.0 / g->inv_i[i];

@@ -32,8 +32,10 @@ typedef struct dem_grains {
     int *mat;
     /* cold */
     double *q;         /* 4 per grain (w, x, y, z) */
-    int *id;           /* id of the grain in slot i */
+    int *id;           /* id of the grain in slot i (dense: 0 .. n-1, renumbered on removal) */
     int *slot_of;      /* slot of grain id */
+    int *tag;          /* stable name of the grain in slot i, never reused (output, contact history keys) */
+    unsigned char *frozen; /* 1: not integrated, its pairs with other frozen grains skipped (dem_freeze_outside_x) */
     double *x0, *y0, *z0; /* positions at the last neighbour rebuild */
     double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
     uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
@@ -66,6 +68,7 @@ struct dem_world {
     /* neighbour list: candidate pairs (slots i < j) within r_i + r_j + skin,
      * each owning a slot of the history hash for the list's lifetime */
     int n_pairs, pair_cap;
+    int n_active_pairs; /* pairs [0, n_active_pairs) have an active grain; the rest (frozen-frozen) are skipped */
     int *pi, *pj;
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
@@ -87,6 +90,9 @@ struct dem_world {
     dem_thread_buf *tb; /* n_threads entries */
     double *scratch;    /* DEM_SCRATCH_PER_GRAIN * cap: re-sorting without allocation */
     int *cell_pos;      /* cell_cap: counting-sort cursor */
+
+    int next_tag;       /* tag of the next grain added */
+    int n_frozen;
 
     long step;
     double time;

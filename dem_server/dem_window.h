@@ -1,0 +1,78 @@
+/* The terrain window: the second paper's terrain replacement (路面更替法,
+ * Zhao & Zang, sec. 2): the bed follows the wheel along +x with a bounded
+ * number of grains, and grains far from the wheel are frozen.
+ *
+ * The settled bed is the sample. At creation the grains of its interior
+ * stretch [x_min + sample_margin, x_min + sample_margin + shift) (away from
+ * the end walls' flat packing) are saved. Then, every exchange, with the
+ * wheel centre x_c the FEM sends:
+ *   - when x_c - behind has passed the back wall by `shift`, every grain with
+ *     x < x_c - behind is removed and the back wall moves up to the survivors;
+ *   - while the front wall is less than `ahead` in front of x_c, a copy of the
+ *     sample stretch is appended in front of it (copies at the stretch's
+ *     period, the first where the grains against the front wall end; a copied
+ *     grain that would overlap one already there is pushed forward just clear
+ *     of it) and the front wall moves to the copy's end;
+ *   - with freeze_distance > 0, grains with |x - x_c| > freeze_distance are
+ *     frozen (dem_freeze_outside_x), re-evaluated every time x_c has moved by
+ *     a grain radius.
+ * Each shift is logged with the grains removed/added and the seam's density. */
+#ifndef DEM_WINDOW_H
+#define DEM_WINDOW_H
+
+#include "dem.h"
+
+/* Automatic freezing distance in contact lengths. Measured (rigid wheel
+ * under 150 N, 20 % slip, tests/dem/test_dem_window.c freeze_distance_sweep,
+ * two seeds): grains frozen beyond 1.1 contact lengths made the wheel sink
+ * 22-30 % less and pull up to 2x the horizontal force (the frozen soil
+ * ahead acts as a wall); beyond 1.7, 2.4 and 3.3 contact lengths sinkage and
+ * force stayed within the seed-to-seed scatter of the long bed (sinkage
+ * +-5 %, horizontal force +-4 N of 22 N). 2.5 keeps a margin. */
+#define DEM_WINDOW_FREEZE_LENGTHS 2.5
+
+/* Everything that changes while the window moves (for checkpoints: these
+ * fields plus the world; the sample is re-read from the settled bed, see
+ * dem_window_create). */
+typedef struct dem_window_state {
+    double x_back, x_front;    /* m, planes of the back and front end walls */
+    double next_offset;        /* m, x offset of the next appended copy of the sample stretch */
+    double x_freeze;           /* m, wheel x at the last freezing update (NAN: none yet) */
+    int wall_back, wall_front; /* indices of the end walls in the world */
+    int shifts_back;           /* removals done */
+    int shifts_front;          /* stretches appended */
+    long removed, added;       /* grains, in total */
+    double seam_min_fraction;  /* lowest solid fraction of a seam slab relative to the sample's, of all seams */
+} dem_window_state;
+
+typedef struct dem_window dem_window;
+
+/* Saves the sample stretch from the grains of w (which must hold the settled
+ * bed and nothing else yet) and finds the end walls (normals +x and -x).
+ * Errors name the dem.window key to change. */
+int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window **out, cm_error *err);
+void dem_window_free(dem_window **win);
+
+/* Footprint check against the trap of a too small soil bin (drawbar pull
+ * 12-43 % low): contact length l = 2 sqrt(2 R z - z^2) from the surface's
+ * radius R (half its z-extent) and the expected sinkage z, tire width b from
+ * its y-extent. Warns (cm_log_warn) naming the key when
+ *   ahead  < 2 l     (bed ahead of the wheel centre: its end wall, like frozen
+ *                     grains, stiffens the soil the wheel pushes),
+ *   behind < l       (bed behind it),
+ *   side clearance (bed wall to tire side) < b / 2 on either side,
+ *   0 < freeze_distance < 2 l.
+ * win may be NULL (no window: the bed's ends at the wheel's start position
+ * are checked, and `ahead` shrinks as the wheel travels). An automatic
+ * freezing distance (def->freeze_distance < 0) is set here to
+ * DEM_WINDOW_FREEZE_LENGTHS contact lengths. Returns the number of warnings. */
+int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_window_def *def, double wheel_x,
+                               double expected_sinkage);
+
+/* One exchange's update with the wheel centre's x. */
+int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err);
+
+const dem_window_state *dem_window_get_state(const dem_window *win);
+void dem_window_set_state(dem_window *win, const dem_window_state *st);
+
+#endif

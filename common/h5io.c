@@ -95,6 +95,24 @@ static int h5_fail(cm_error *err, const char *file, const char *fmt, ...)
 {
     reason r = {{0}};
     H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, walk_cb, &r);
+    /* A failed write's reason is a long multi-line record ("file write
+     * failed: time = ..., errno = 27, error message = 'File too large', ..."):
+     * keep the system's message, or the first clause. */
+    const char *sys = strstr(r.s, "error message = '");
+    if (sys) {
+        char msg[128];
+        snprintf(msg, sizeof msg, "%s", sys + strlen("error message = '"));
+        char *q = strchr(msg, '\'');
+        if (q)
+            *q = '\0';
+        char *cut = strstr(r.s, ": time =");
+        if (cut)
+            *cut = '\0';
+        size_t len = strlen(r.s);
+        snprintf(r.s + len, sizeof r.s - len, " (%s)", msg);
+    } else {
+        r.s[strcspn(r.s, "\n")] = '\0';
+    }
     char what[512];
     va_list ap;
     va_start(ap, fmt);
@@ -274,6 +292,12 @@ static int dataset_shape(cm_h5 *f, const char *path, int *rank, hsize_t dims[2],
 }
 
 /* ---- file ---------------------------------------------------------------------- */
+
+void cm_h5_library_init(void)
+{
+    H5dont_atexit();
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+}
 
 cm_h5_def cm_h5_default_def(void)
 {

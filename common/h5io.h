@@ -73,6 +73,12 @@ typedef struct cm_h5_def {
 
 cm_h5_def cm_h5_default_def(void);
 
+/* Call first in main, before any other HDF5 use: HDF5 then does not tidy up
+ * at exit (its exit-time clean-up crashed on a file whose final flush had
+ * failed, e.g. on a full disk, turning one clear error into a segfault),
+ * and prints no error stacks of its own. */
+void cm_h5_library_init(void);
+
 /* ---- File --------------------------------------------------------------- */
 
 /* Creates (truncates) the results file `path`; with def->xdmf set, the XDMF

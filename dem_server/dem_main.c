@@ -27,6 +27,7 @@
 #include "dem.h"
 #include "dem_checkpoint.h"
 #include "dem_coupled.h"
+#include "h5io.h"
 #include "log.h"
 #include "runcfg.h"
 #include "scene.h"
@@ -212,7 +213,10 @@ static int run(const options *o)
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */
     if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
-        cm_log_error("%s", err.msg);
+        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for fem_server", (int)g_stop);
+        else
+            cm_log_error("%s", err.msg);
         exit_code = g_stop ? 128 + (int)g_stop : 3;
         goto cleanup;
     }
@@ -356,6 +360,7 @@ int main(int argc, char **argv)
     if (!o.scene || (!o.shm && !o.standalone) || (o.resume && o.standalone))
         return usage();
     cm_log_set_tag("dem");
+    cm_h5_library_init();
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */

@@ -217,7 +217,10 @@ static int run(const options *o)
     memcpy(x_prev, ipc_surface_nodes(ch), 3 * (size_t)nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", nn, nt, o->shm);
     if ((rc = ipc_accept(ch))) {
-        cm_log_error("%s", ipc_error(ch));
+        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_stop);
+        else
+            cm_log_error("%s", ipc_error(ch));
         exit_code = 3;
         goto cleanup;
     }
@@ -500,6 +503,7 @@ int main(int argc, char **argv)
     if (!o.scene || (!o.shm && !o.export_mesh))
         return usage();
     cm_log_set_tag("fem");
+    cm_h5_library_init();
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */

@@ -12,7 +12,13 @@
  *   run's HDF5 files open with every flushed row, its last checkpoint reads,
  *   and `./run --resume` ends as the uninterrupted run.
  * The servers are started directly (not through ./run) so that the test
- * knows their pids; resuming goes through ./run. */
+ * knows their pids; resuming goes through ./run.
+ *
+ * I/O errors end a run with one clear error line, never a crash:
+ * full_disk_one_error_line (RLIMIT_FSIZE in the child, SIGXFSZ ignored:
+ * writes fail with EFBIG as on a full disk), output_folder_unwritable (a
+ * path under a regular file: as root, permissions would not stop a write),
+ * missing_mesh_file. */
 #include <errno.h>
 #include <fcntl.h>
 #include <inttypes.h>
@@ -21,6 +27,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -450,7 +457,151 @@ static int sigkill_random_step_20_trials(void)
     return 0;
 }
 
+/* Runs argv with stdout+stderr to log and, when fsize > 0, file sizes
+ * limited to fsize bytes with SIGXFSZ ignored (a write past it fails with
+ * EFBIG, as on a full disk). Returns the exit status, 128 + signal. */
+static int run_logged(const char *const *argv, const char *log, long fsize)
+{
+    setenv("DEMFEM_NO_BUILD", "1", 1);
+    setenv("DEMFEM_BUILD_DIR", DEMFEM_BUILD_DIR, 1);
+    pid_t pid = fork();
+    if (pid == 0) {
+        int fd = open(log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd < 0 || dup2(fd, 1) < 0 || dup2(fd, 2) < 0)
+            _exit(120);
+        if (fsize > 0) {
+            struct rlimit rl = {(rlim_t)fsize, (rlim_t)fsize};
+            signal(SIGXFSZ, SIG_IGN);
+            if (setrlimit(RLIMIT_FSIZE, &rl) != 0)
+                _exit(121);
+        }
+        execve(argv[0], (char *const *)argv, environ);
+        _exit(122);
+    }
+    return pid > 0 ? wait_exit(pid, 120) : -1;
+}
+
+/* Lines of the log containing "error" (a launcher's or a server's), except
+ * a peer relaying the failed side's reason; a crash leaves a marker. */
+static int error_lines(const char *log, char *first, size_t len)
+{
+    static char text[1 << 18];
+    file_text(log, text, sizeof text);
+    if (strstr(text, "Segmentation") || strstr(text, "core dumped") || strstr(text, "Abort") ||
+        strstr(text, "Sanitizer") || strstr(text, "HDF5-DIAG"))
+        return -1;
+    int n = 0;
+    for (char *line = strtok(text, "\n"); line; line = strtok(NULL, "\n"))
+        if (strstr(line, "error") && !strstr(line, "peer dem failed") && !strstr(line, "peer fem failed")) {
+            if (n++ == 0)
+                snprintf(first, len, "%s", line);
+        }
+    return n;
+}
+
+static int scene_variant(const char *path, const char *from, const char *to)
+{
+    static char text[1 << 14];
+    ENSURE(file_text(DEMFEM_SOURCE_DIR "/tests/coupling/scenes/tire_ckpt.cfg", text, sizeof text) == 0);
+    char *at = from ? strstr(text, from) : NULL;
+    ENSURE(!from || at);
+    FILE *f = fopen(path, "w");
+    ENSURE(f);
+    if (at) {
+        fwrite(text, 1, (size_t)(at - text), f);
+        fputs(to, f);
+        fputs(at + strlen(from), f);
+    } else {
+        fputs(text, f);
+    }
+    ENSURE(fclose(f) == 0);
+    return 0;
+}
+
+static int full_disk_one_error_line(void)
+{
+    snprintf(g_dir, sizeof g_dir, "/tmp/demfem-restart-%d", (int)getpid());
+    mkdir(g_dir, 0755);
+    snprintf(g_scene, sizeof g_scene, "%s/tire_ckpt.cfg", g_dir);
+    if (scene_variant(g_scene, NULL, NULL))
+        return 1;
+    /* 300 kB: the first results and checkpoints fit, a later write does not */
+    char out[300], log[320], first[1024] = "";
+    snprintf(out, sizeof out, "%s/full", g_dir);
+    snprintf(log, sizeof log, "%s/full.log", g_dir);
+    const char *argv[] = {DEMFEM_SOURCE_DIR "/run", g_scene, "--out", out, NULL};
+    int rc = run_logged(argv, log, 300 * 1024);
+    int n = error_lines(log, first, sizeof first);
+    printf("  exit %d; %d error line(s): %s\n", rc, n, first);
+    ENSURE_MSG(rc > 0 && rc < 128, "exit %d (log %s)", rc, log);
+    ENSURE_MSG(n >= 1 && n <= 2 && strstr(first, "File too large") && strstr(first, out),
+               "want one error line naming the file and 'File too large' (log %s)", log);
+    /* 2: the failing server's line and the launcher's "failed (exit N)" summary */
+    if (n == 2) {
+        static char text[1 << 18];
+        file_text(log, text, sizeof text);
+        ENSURE(strstr(text, "[run]"));
+    }
+    cleanup();
+    return 0;
+}
+
+static int output_folder_unwritable(void)
+{
+    snprintf(g_dir, sizeof g_dir, "/tmp/demfem-restart-%d", (int)getpid());
+    mkdir(g_dir, 0755);
+    snprintf(g_scene, sizeof g_scene, "%s/tire_ckpt.cfg", g_dir);
+    if (scene_variant(g_scene, NULL, NULL))
+        return 1;
+    char file[300], out[320], log[320], first[1024];
+    snprintf(file, sizeof file, "%s/a_file", g_dir);
+    FILE *f = fopen(file, "w");
+    ENSURE(f && fclose(f) == 0);
+    snprintf(out, sizeof out, "%s/results", file); /* under a regular file: nothing can be created */
+    snprintf(log, sizeof log, "%s/unwritable.log", g_dir);
+    const char *runs[3][9] = {
+        {DEMFEM_SOURCE_DIR "/run", g_scene, "--out", out, NULL},
+        {DEM_SERVER, "--scene", g_scene, "--standalone", "--out", out, NULL},
+        {FEM_SERVER, "--scene", g_scene, "--shm", "/demfem-restart-unwritable", "--out", out, NULL}};
+    for (int k = 0; k < 3; k++) {
+        int rc = run_logged(runs[k], log, 0);
+        int n = error_lines(log, first, sizeof first);
+        printf("  %s: exit %d: %s\n", runs[k][0], rc, first);
+        ENSURE_MSG(rc == 1 && n == 1 && strstr(first, "cannot create output folder") && strstr(first, out),
+                   "%s: exit %d, %d error lines (log %s)", runs[k][0], rc, n, log);
+    }
+    ENSURE(access("/dev/shm/demfem-restart-unwritable", F_OK) != 0);
+    cleanup();
+    return 0;
+}
+
+static int missing_mesh_file(void)
+{
+    snprintf(g_dir, sizeof g_dir, "/tmp/demfem-restart-%d", (int)getpid());
+    mkdir(g_dir, 0755);
+    snprintf(g_scene, sizeof g_scene, "%s/tire_ckpt.cfg", g_dir);
+    if (scene_variant(g_scene, "mesh = { type = \"tire\"; resolution = 0.25; };",
+                      "mesh = { type = \"gmsh\"; file = \"no_such_tire.msh\"; };"))
+        return 1;
+    char out[300], log[320], first[1024];
+    snprintf(out, sizeof out, "%s/out", g_dir);
+    snprintf(log, sizeof log, "%s/nomesh.log", g_dir);
+    const char *argv[] = {DEMFEM_SOURCE_DIR "/run", g_scene, "--out", out, NULL};
+    int rc = run_logged(argv, log, 0);
+    int n = error_lines(log, first, sizeof first);
+    printf("  exit %d: %s\n", rc, first);
+    ENSURE_MSG(rc == 1 && n >= 1 && strstr(first, "no_such_tire.msh") && strstr(first, "No such file"),
+               "exit %d (log %s)", rc, log);
+    /* besides the launcher's summary, nothing else complains */
+    ENSURE_MSG(n == 1 || n == 2, "%d error lines (log %s)", n, log);
+    cleanup();
+    return 0;
+}
+
 static const test_case tests[] = {
+    {"full_disk_one_error_line", full_disk_one_error_line},
+    {"output_folder_unwritable", output_folder_unwritable},
+    {"missing_mesh_file", missing_mesh_file},
     {"interrupt_resume_bit_exact", interrupt_resume_bit_exact},
     {"sigkill_random_step_20_trials", sigkill_random_step_20_trials},
 };

@@ -61,6 +61,26 @@ static void reserve_hash(cm_ckpt *ck, dem_hash *h, int cap)
     h->cap = cap;
 }
 
+/* The rows of a history table; an empty slot's row is never read and never
+ * set (dem_hash_reset clears only the keys): stored as -1. */
+static void hash_rows(cm_ckpt *ck, dem_hash *h, int cap)
+{
+    if (!ck->writing) {
+        cm_ckpt_i32(ck, "/pairs/hash_row", h->row, (size_t)cap);
+        return;
+    }
+    int *rows = malloc((size_t)(cap ? cap : 1) * sizeof *rows);
+    if (!rows) {
+        if (ck->rc == CM_OK)
+            ck->rc = cm_fail(ck->err, CM_ERR_NOMEM, "%s: out of memory", ck->path);
+        return;
+    }
+    for (int k = 0; k < cap; k++)
+        rows[k] = h->key[k] == DEM_HASH_EMPTY ? -1 : h->row[k];
+    cm_ckpt_i32(ck, "/pairs/hash_row", rows, (size_t)cap);
+    free(rows);
+}
+
 static void visit_world(cm_ckpt *ck, dem_world *w)
 {
     dem_grains *g = &w->g;
@@ -118,7 +138,7 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
         reserve_hash(ck, h, cap);
         cm_ckpt_int(ck, "/pairs/hash_count", &h->count);
         cm_ckpt_u64(ck, "/pairs/hash_key", h->key, (size_t)cap);
-        cm_ckpt_i32(ck, "/pairs/hash_row", h->row, (size_t)cap);
+        hash_rows(ck, h, cap);
         cm_ckpt_f64(ck, "/pairs/springs", w->hist_val[w->hist_cur], 3 * (size_t)w->n_pairs);
     }
     cm_ckpt_double(ck, "/pairs/skin", &w->skin);

@@ -395,6 +395,7 @@ static int file_new(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_e
 
 int cm_h5_create(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err)
 {
+    *out = NULL;
     cm_h5 *f;
     int rc = file_new(path, def_in, &f, err);
     if (rc != CM_OK)

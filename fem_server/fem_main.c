@@ -138,7 +138,7 @@ static int run(const options *o)
     cm_h5_series *series = NULL;
     double *x_prev = NULL, *x_now = NULL, *v_now = NULL;
     series_buf travel = {0};
-    int exit_code = 1, rc;
+    int exit_code = 1, rc, clean_stop = 0;
 
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
@@ -452,6 +452,7 @@ static int run(const options *o)
     cm_log_info("results: %s/traction.csv, %s/wheel.h5", o->out, o->out);
     cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(model));
     exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+    clean_stop = 1;
     goto cleanup;
 
 fail:
@@ -462,7 +463,8 @@ fail:
 cleanup:
     if (h5 && cm_h5_close(&h5, &err))
         cm_log_error("%s", err.msg);
-    ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
+    /* interrupted but finished cleanly (checkpoint written, finish answered): not a failure for the peer */
+    ipc_close(&ch, exit_code == 0 || clean_stop ? IPC_OK : IPC_ERR_PEER_FAILED);
     fem_destroy(&model);
     cm_scene_close(&scene);
     series_free(&travel);

@@ -172,6 +172,19 @@ int cm_ckpt_choose(const char *dir, long *exchange, char *dem_path, char *fem_pa
     return CM_OK;
 }
 
+int cm_ckpt_adopt(const char *path, cm_error *err)
+{
+    size_t len = strlen(path);
+    static const char suffix[] = ".prev.h5";
+    if (len < sizeof suffix || strcmp(path + len - (sizeof suffix - 1), suffix) != 0)
+        return CM_OK;
+    char last[1100];
+    snprintf(last, sizeof last, "%.*s.h5", (int)(len - (sizeof suffix - 1)), path);
+    if (rename(path, last) != 0)
+        return cm_fail(err, CM_ERR_IO, "renaming %s to %s: %s", path, last, strerror(errno));
+    return CM_OK;
+}
+
 int cm_ckpt_file_hash(const char *path, uint64_t *hash, cm_error *err)
 {
     FILE *fp = fopen(path, "rb");

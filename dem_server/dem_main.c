@@ -125,6 +125,8 @@ static int restore_checkpoint(dem_world *w, dem_coupled_state *st, void *user, c
     output_ctx *c = user;
     dem_ckpt_outputs o;
     int rc = dem_checkpoint_read(c->resume_path, c->resume_exchange, w, st, &o, c->scene_hash, err);
+    if (rc == CM_OK)
+        rc = cm_ckpt_adopt(c->resume_path, err);
     if (rc == CM_OK && c->dir)
         rc = dem_output_reopen(c->dir, o.frames, o.series_rows, &c->out, err);
     c->last_frame = o.last_frame;

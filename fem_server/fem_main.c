@@ -231,6 +231,8 @@ static int run(const options *o)
     if (o->resume) {
         fem_ckpt_run cr = {.drive = &ds, .n_nodes = nn, .x_prev = x_prev};
         rc = fem_checkpoint_read(ckpt_path, resume_exchange, model, &cr, scene_hash, o->out, &err);
+        if (rc == CM_OK)
+            rc = cm_ckpt_adopt(ckpt_path, &err);
         if (rc == CM_OK) {
             series_free(&travel);
             travel = (series_buf){cr.travel[0], cr.travel[1], cr.travel[2], cr.travel[3], cr.travel_n, cr.travel_n};

@@ -352,6 +352,24 @@ static int interrupt_resume_bit_exact(void)
         if (resume_matches(&ref, out))
             return 1;
     }
+    /* Refused with a reason: a changed scene, then checkpoints of one side only. */
+    char out[300], log[320], path[400];
+    snprintf(out, sizeof out, "%s/interrupted1", g_dir);
+    snprintf(log, sizeof log, "%s.refused.log", out);
+    static char text[1 << 16];
+    FILE *f = fopen(g_scene, "a");
+    ENSURE(f && fputs("# edited after the run\n", f) >= 0 && fclose(f) == 0);
+    int rc = run_resume(out, log);
+    file_text(log, text, sizeof text);
+    ENSURE_MSG(rc != 0 && strstr(text, "the scene file differs from the checkpointed run"), "exit %d (log %s)", rc,
+               log);
+    for (int k = 0; k < 2; k++) {
+        cm_ckpt_path(out, "dem", k, path, sizeof path);
+        unlink(path);
+    }
+    rc = run_resume(out, log);
+    file_text(log, text, sizeof text);
+    ENSURE_MSG(rc != 0 && strstr(text, "no consistent checkpoint"), "exit %d (log %s)", rc, log);
     cleanup();
     return 0;
 }

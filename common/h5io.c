@@ -1077,7 +1077,7 @@ static int relist_step(cm_h5 *f, hid_t g, const kept_step *k, cm_error *err)
     }
     f->step = k->step;
     f->time = k->time;
-    snprintf(f->group, sizeof f->group, "/steps/%s", k->name);
+    snprintf(f->group, sizeof f->group, "/steps/%06ld", k->step);
     if (f->xdmf == CM_H5_XDMF_NONE) {
         f->nfields = f->step_first;
         return CM_OK;

@@ -48,6 +48,9 @@ extern char **environ;
 #define FEM_SERVER DEMFEM_BUILD_DIR "/fem_server/fem_server"
 #define EXCHANGES 1000 /* run.end_time / (coupling.dt * exchange_every) */
 #define CKPT_EVERY 100
+#ifndef KILL_TRIALS
+#define KILL_TRIALS 20
+#endif
 
 static char g_dir[200], g_scene[300];
 
@@ -415,7 +418,7 @@ static int sigkill_random_step_20_trials(void)
     if (setup(&ref))
         return 1;
     uint64_t seed = 0x9e3779b97f4a7c15ull; /* fixed: the same trials every time */
-    const int trials = 20;
+    const int trials = KILL_TRIALS;
     double worst_exit = 0;
     for (int t = 0; t < trials; t++) {
         int kill_fem = (int)(rng_next(&seed) & 1);

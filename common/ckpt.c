@@ -180,8 +180,11 @@ int cm_ckpt_adopt(const char *path, cm_error *err)
         return CM_OK;
     char last[1100];
     snprintf(last, sizeof last, "%.*s.h5", (int)(len - (sizeof suffix - 1)), path);
-    if (rename(path, last) != 0)
-        return cm_fail(err, CM_ERR_IO, "renaming %s to %s: %s", path, last, strerror(errno));
+    /* Removing the newer file (not renaming the previous one over it) keeps
+     * the resumed exchange under one name throughout: the other server may
+     * be choosing at this very moment. */
+    if (unlink(last) != 0 && errno != ENOENT)
+        return cm_fail(err, CM_ERR_IO, "removing %s (newer than the checkpoint resumed): %s", last, strerror(errno));
     return CM_OK;
 }
 

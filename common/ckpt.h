@@ -66,9 +66,10 @@ void cm_ckpt_count(cm_ckpt *ck, const char *name, int *v, int max);
 int cm_ckpt_choose(const char *dir, long *exchange, char *dem_path, char *fem_path, size_t len, cm_error *err);
 
 /* After resuming from `path`: when it is the previous checkpoint
- * (<role>.prev.h5), makes it the last one again (the newer file belonged to
- * the abandoned run: left as the last one, the next checkpoint would push the
- * resumed one out while the other server might still need it). */
+ * (<role>.prev.h5), removes the last one (<role>.h5, newer, of the abandoned
+ * run: left in place, the next checkpoint would push the resumed one out
+ * while the other server might still need it). The next checkpoint then
+ * keeps the resumed one as the previous. */
 int cm_ckpt_adopt(const char *path, cm_error *err);
 
 /* FNV-1a 64 of a file's bytes (the scene, to refuse resuming a changed one). */

@@ -4,6 +4,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 struct cm_csv {
     FILE *fp;
@@ -81,4 +82,45 @@ int cm_csv_close(cm_csv **cp, cm_error *err)
 const char *cm_csv_path(const cm_csv *c)
 {
     return c ? c->path : NULL;
+}
+
+int cm_csv_reopen(const char *path, int ncols, long rows, cm_csv **out, cm_error *err)
+{
+    *out = NULL;
+    if (!path || ncols < 1 || rows < 0)
+        return cm_fail(err, CM_ERR_RANGE, "csv %s: bad arguments to reopen", path ? path : "(null)");
+    cm_csv *c = calloc(1, sizeof *c);
+    if (!c || !(c->path = strdup(path))) {
+        free(c);
+        return cm_fail(err, CM_ERR_NOMEM, "csv %s: out of memory", path);
+    }
+    c->ncols = ncols;
+    int rc = CM_OK;
+    if (!(c->fp = fopen(path, "r+"))) {
+        rc = cm_fail(err, CM_ERR_IO, "cannot reopen csv file %s: %s", path, strerror(errno));
+        goto fail;
+    }
+    /* The end of line 1 + rows (the header and the kept rows). */
+    long lines = 0, want = rows + 1;
+    int ch;
+    while (lines < want && (ch = getc(c->fp)) != EOF)
+        lines += ch == '\n';
+    if (lines < want) {
+        rc = cm_fail(err, CM_ERR_IO, "csv file %s holds %ld complete rows, the checkpoint expects %ld", path,
+                     lines > 0 ? lines - 1 : 0, rows);
+        goto fail;
+    }
+    long pos = ftell(c->fp);
+    if (pos < 0 || fflush(c->fp) != 0 || ftruncate(fileno(c->fp), pos) != 0 || fseek(c->fp, pos, SEEK_SET) != 0) {
+        rc = cm_fail(err, CM_ERR_IO, "cutting csv file %s back to %ld rows: %s", path, rows, strerror(errno));
+        goto fail;
+    }
+    *out = c;
+    return CM_OK;
+fail:
+    if (c->fp)
+        fclose(c->fp);
+    free(c->path);
+    free(c);
+    return rc;
 }

@@ -16,6 +16,12 @@ typedef struct cm_csv cm_csv;
  * Column names must be non-empty and free of ',', '"', and line breaks. */
 int cm_csv_create(const char *path, const char *const *columns, int ncols, cm_csv **out, cm_error *err);
 
+/* Reopens `path` to continue it after a restart: keeps the header and the
+ * first `rows` rows, cuts off anything after them (rows a killed run wrote
+ * past its last checkpoint) and appends from there. Fails naming the file
+ * when it holds fewer rows. */
+int cm_csv_reopen(const char *path, int ncols, long rows, cm_csv **out, cm_error *err);
+
 /* Appends one row of ncols values and flushes it. */
 int cm_csv_row(cm_csv *c, const double *values, cm_error *err);
 

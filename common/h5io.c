@@ -95,6 +95,24 @@ static int h5_fail(cm_error *err, const char *file, const char *fmt, ...)
 {
     reason r = {{0}};
     H5Ewalk2(H5E_DEFAULT, H5E_WALK_UPWARD, walk_cb, &r);
+    /* A failed write's reason is a long multi-line record ("file write
+     * failed: time = ..., errno = 27, error message = 'File too large', ..."):
+     * keep the system's message, or the first clause. */
+    const char *sys = strstr(r.s, "error message = '");
+    if (sys) {
+        char msg[128];
+        snprintf(msg, sizeof msg, "%s", sys + strlen("error message = '"));
+        char *q = strchr(msg, '\'');
+        if (q)
+            *q = '\0';
+        char *cut = strstr(r.s, ": time =");
+        if (cut)
+            *cut = '\0';
+        size_t len = strlen(r.s);
+        snprintf(r.s + len, sizeof r.s - len, " (%s)", msg);
+    } else {
+        r.s[strcspn(r.s, "\n")] = '\0';
+    }
     char what[512];
     va_list ap;
     va_start(ap, fmt);
@@ -196,8 +214,8 @@ static void sb_xml(strbuf *b, const char *s)
 
 /* ---- small HDF5 helpers -------------------------------------------------------- */
 
-static int write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown, int is_int, const void *data,
-                       size_t n, int ncomp, cm_error *err)
+static int write_typed(cm_h5 *f, hid_t loc, const char *name, const char *shown, hid_t ftype, hid_t mtype,
+                       const void *data, size_t n, int ncomp, cm_error *err)
 {
     if (ncomp < 1 || (n > 0 && !data))
         return cm_fail(err, CM_ERR_RANGE, "%s: dataset %s: need ncomp >= 1 and data for %zu rows", f->path,
@@ -206,8 +224,6 @@ static int write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown,
     hid_t space = H5Screate_simple(ncomp == 1 ? 1 : 2, dims, NULL);
     if (space < 0)
         return h5_fail(err, f->path, "dataset %s: dataspace of %zu x %d", shown, n, ncomp);
-    hid_t ftype = is_int ? H5T_STD_I32LE : H5T_IEEE_F64LE;
-    hid_t mtype = is_int ? H5T_NATIVE_INT : H5T_NATIVE_DOUBLE;
     int rc = CM_OK;
     hid_t d = H5Dcreate2(loc, name, ftype, space, f->lcpl, H5P_DEFAULT, H5P_DEFAULT);
     if (d < 0)
@@ -218,6 +234,13 @@ static int write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown,
         H5Dclose(d);
     H5Sclose(space);
     return rc;
+}
+
+static int write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown, int is_int, const void *data,
+                       size_t n, int ncomp, cm_error *err)
+{
+    return write_typed(f, loc, name, shown, is_int ? H5T_STD_I32LE : H5T_IEEE_F64LE,
+                       is_int ? H5T_NATIVE_INT : H5T_NATIVE_DOUBLE, data, n, ncomp, err);
 }
 
 static int write_attr(cm_h5 *f, hid_t obj, const char *shown, const char *name, hid_t ftype, hid_t mtype,
@@ -270,6 +293,12 @@ static int dataset_shape(cm_h5 *f, const char *path, int *rank, hsize_t dims[2],
 
 /* ---- file ---------------------------------------------------------------------- */
 
+void cm_h5_library_init(void)
+{
+    H5dont_atexit();
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+}
+
 cm_h5_def cm_h5_default_def(void)
 {
     return (cm_h5_def){
@@ -313,7 +342,8 @@ static char *make_xmf_path(const char *path)
     return x;
 }
 
-int cm_h5_create(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err)
+/* Checks def and allocates the handle (no HDF5 file yet). */
+static int file_new(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err)
 {
     *out = NULL;
     cm_h5_def def = def_in ? *def_in : cm_h5_default_def();
@@ -332,14 +362,6 @@ int cm_h5_create(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_erro
         if (def.xdmf != CM_H5_XDMF_POLYVERTEX && def.xdmf != CM_H5_XDMF_TETRAHEDRON)
             return cm_fail(err, CM_ERR_RANGE, "%s: unknown XDMF grid kind %d", path, (int)def.xdmf);
     }
-
-    /* Open the file ourselves first: the system's reason ("No such file or
-     * directory") is clearer than HDF5's error stack. No O_TRUNC: truncating
-     * is left to H5Fcreate. */
-    int fd = open(path, O_WRONLY | O_CREAT, 0644);
-    if (fd < 0)
-        return cm_fail(err, CM_ERR_IO, "cannot create results file %s: %s", path, strerror(errno));
-    close(fd);
 
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
 
@@ -367,10 +389,30 @@ int cm_h5_create(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_erro
     const char *slash = strrchr(f->path, '/');
     f->base = slash ? slash + 1 : f->path;
 
+    *out = f;
+    return CM_OK;
+}
+
+int cm_h5_create(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err)
+{
+    *out = NULL;
+    cm_h5 *f;
+    int rc = file_new(path, def_in, &f, err);
+    if (rc != CM_OK)
+        return rc;
+    /* Open the file ourselves first: the system's reason ("No such file or
+     * directory") is clearer than HDF5's error stack. No O_TRUNC: truncating
+     * is left to H5Fcreate. */
+    int fd = open(path, O_WRONLY | O_CREAT, 0644);
+    if (fd < 0) {
+        rc = cm_fail(err, CM_ERR_IO, "cannot create results file %s: %s", path, strerror(errno));
+        free_file(f);
+        return rc;
+    }
+    close(fd);
     /* Default file access: a reader in this process (H5Fopen with default
      * properties) shares the open file; a different close degree would make
      * it fail ("file close degree doesn't match"). */
-    int rc = CM_OK;
     if ((f->fid = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT)) < 0)
         rc = h5_fail(err, path, "cannot create results file");
     if (rc == CM_OK && ((f->lcpl = H5Pcreate(H5P_LINK_CREATE)) < 0 ||
@@ -544,6 +586,14 @@ static int step_write(cm_h5 *f, const char *name, cm_h5_center center, int is_in
         f->cap_fields = cap;
     }
     int rc = write_array(f, f->gid, name, shown, is_int, data, n, ncomp, err);
+    if (rc == CM_OK) { /* how the XDMF lists it, for cm_h5_reopen */
+        hid_t d = H5Dopen2(f->gid, name, H5P_DEFAULT);
+        int32_t c32 = (int32_t)center;
+        rc = d < 0 ? h5_fail(err, f->path, "reopening dataset %s", shown)
+                   : write_attr(f, d, shown, "xdmf_center", H5T_STD_I32LE, H5T_NATIVE_INT32, &c32, err);
+        if (d >= 0)
+            H5Dclose(d);
+    }
     if (rc != CM_OK)
         return rc;
     field *fl = &f->fields[f->nfields++];
@@ -932,4 +982,314 @@ int cm_h5_series_append(cm_h5_series *s, const double *row, cm_error *err)
 long cm_h5_series_rows(const cm_h5_series *s)
 {
     return s ? s->rows : 0;
+}
+
+/* ---- resuming a run ----------------------------------------------------------- */
+
+static int open_existing(cm_h5 *f, const char *path, int writable, cm_error *err)
+{
+    if (access(path, writable ? R_OK | W_OK : R_OK) != 0)
+        return cm_fail(err, CM_ERR_IO, "cannot open %s: %s", path, strerror(errno));
+    if ((f->fid = H5Fopen(path, writable ? H5F_ACC_RDWR : H5F_ACC_RDONLY, H5P_DEFAULT)) < 0)
+        return h5_fail(err, path, "cannot open as HDF5");
+    if ((f->lcpl = H5Pcreate(H5P_LINK_CREATE)) < 0 || H5Pset_create_intermediate_group(f->lcpl, 1) < 0)
+        return h5_fail(err, path, "link creation properties");
+    return CM_OK;
+}
+
+int cm_h5_open(const char *path, int writable, cm_h5 **out, cm_error *err)
+{
+    cm_h5 *f;
+    int rc = file_new(path, NULL, &f, err);
+    if (rc != CM_OK)
+        return rc;
+    if ((rc = open_existing(f, path, writable, err)) != CM_OK) {
+        cm_h5_close(&f, NULL);
+        return rc;
+    }
+    *out = f;
+    return CM_OK;
+}
+
+typedef struct kept_step {
+    long step;
+    double time;
+    char name[32];
+} kept_step;
+
+static int cmp_kept(const void *a, const void *b)
+{
+    long x = ((const kept_step *)a)->step, y = ((const kept_step *)b)->step;
+    return (x > y) - (x < y);
+}
+
+static int read_attr(hid_t obj, const char *name, hid_t mtype, void *value)
+{
+    if (H5Aexists(obj, name) <= 0)
+        return -1;
+    hid_t a = H5Aopen(obj, name, H5P_DEFAULT);
+    if (a < 0)
+        return -1;
+    herr_t st = H5Aread(a, mtype, value);
+    H5Aclose(a);
+    return st < 0 ? -1 : 0;
+}
+
+/* Lists the datasets of a kept step again (as step_write recorded them). */
+static int relist_step(cm_h5 *f, hid_t g, const kept_step *k, cm_error *err)
+{
+    H5G_info_t gi;
+    if (H5Gget_info(g, &gi) < 0)
+        return h5_fail(err, f->path, "listing /steps/%s", k->name);
+    f->step_first = f->nfields;
+    for (hsize_t i = 0; i < gi.nlinks; i++) {
+        char name[NAME_MAX_LEN + 1];
+        if (H5Lget_name_by_idx(g, ".", H5_INDEX_NAME, H5_ITER_INC, i, name, sizeof name, H5P_DEFAULT) < 0)
+            return h5_fail(err, f->path, "listing /steps/%s", k->name);
+        char shown[sizeof k->name + NAME_MAX_LEN + 9];
+        snprintf(shown, sizeof shown, "/steps/%s/%s", k->name, name);
+        int rank, is_int;
+        hsize_t dims[2];
+        int rc = dataset_shape(f, shown, &rank, dims, &is_int, err);
+        if (rc != CM_OK)
+            return rc;
+        int32_t center = CM_H5_UNLISTED;
+        hid_t d = H5Dopen2(g, name, H5P_DEFAULT);
+        if (d >= 0) {
+            if (read_attr(d, "xdmf_center", H5T_NATIVE_INT32, &center) != 0 || center < 0 || center > CM_H5_CELL)
+                center = CM_H5_UNLISTED;
+            H5Dclose(d);
+        }
+        if (f->nfields == f->cap_fields) {
+            size_t cap = f->cap_fields ? 2 * f->cap_fields : 16;
+            field *nf = realloc(f->fields, cap * sizeof *nf);
+            if (!nf)
+                return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", f->path);
+            f->fields = nf;
+            f->cap_fields = cap;
+        }
+        field *fl = &f->fields[f->nfields++];
+        snprintf(fl->name, sizeof fl->name, "%s", name);
+        fl->is_int = is_int;
+        fl->n = (size_t)dims[0];
+        fl->ncomp = rank == 1 ? 1 : (int)dims[1];
+        fl->center = (cm_h5_center)center;
+    }
+    f->step = k->step;
+    f->time = k->time;
+    snprintf(f->group, sizeof f->group, "/steps/%06ld", k->step);
+    if (f->xdmf == CM_H5_XDMF_NONE) {
+        f->nfields = f->step_first;
+        return CM_OK;
+    }
+    size_t npoints = 0, ncells = 0;
+    int rc = check_step(f, &npoints, &ncells, err);
+    if (rc == CM_OK && f->nsteps == f->cap_steps) {
+        size_t cap = f->cap_steps ? 2 * f->cap_steps : 64;
+        step_rec *ns = realloc(f->steps, cap * sizeof *ns);
+        if (!ns)
+            return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", f->path);
+        f->steps = ns;
+        f->cap_steps = cap;
+    }
+    if (rc != CM_OK)
+        return rc;
+    f->steps[f->nsteps++] = (step_rec){.step = k->step, .time = k->time, .first = f->step_first,
+                                       .count = f->nfields - f->step_first, .npoints = npoints, .ncells = ncells};
+    return CM_OK;
+}
+
+static int reopen_steps(cm_h5 *f, long keep, cm_error *err)
+{
+    htri_t has = H5Lexists(f->fid, "/steps", H5P_DEFAULT);
+    if (has < 0)
+        return h5_fail(err, f->path, "looking for /steps");
+    if (has == 0)
+        return CM_OK;
+    hid_t g = H5Gopen2(f->fid, "/steps", H5P_DEFAULT);
+    H5G_info_t gi;
+    if (g < 0 || H5Gget_info(g, &gi) < 0) {
+        int rc = h5_fail(err, f->path, "opening /steps");
+        if (g >= 0)
+            H5Gclose(g);
+        return rc;
+    }
+    kept_step *ks = calloc(gi.nlinks ? gi.nlinks : 1, sizeof *ks);
+    size_t nk = 0;
+    int rc = ks ? CM_OK : cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", f->path);
+    for (hsize_t i = 0; i < gi.nlinks && rc == CM_OK; i++) {
+        kept_step *k = &ks[nk];
+        int64_t s64 = -1;
+        if (H5Lget_name_by_idx(g, ".", H5_INDEX_NAME, H5_ITER_INC, i, k->name, sizeof k->name, H5P_DEFAULT) < 0) {
+            rc = h5_fail(err, f->path, "listing /steps");
+            break;
+        }
+        hid_t sg = H5Gopen2(g, k->name, H5P_DEFAULT);
+        if (sg < 0 || read_attr(sg, "step", H5T_NATIVE_INT64, &s64) != 0 ||
+            read_attr(sg, "time", H5T_NATIVE_DOUBLE, &k->time) != 0)
+            rc = cm_fail(err, CM_ERR_PARSE, "%s: /steps/%s lacks its step or time attribute", f->path, k->name);
+        if (sg >= 0)
+            H5Gclose(sg);
+        k->step = (long)s64;
+        nk++;
+    }
+    /* Delete after listing: deleting shifts the link indices. */
+    size_t kept = 0;
+    for (size_t i = 0; i < nk && rc == CM_OK; i++) {
+        if (ks[i].step > keep) {
+            if (H5Ldelete(g, ks[i].name, H5P_DEFAULT) < 0)
+                rc = h5_fail(err, f->path, "deleting /steps/%s beyond the checkpoint", ks[i].name);
+        } else {
+            ks[kept++] = ks[i];
+        }
+    }
+    if (rc == CM_OK)
+        qsort(ks, kept, sizeof *ks, cmp_kept);
+    if (rc == CM_OK && f->xdmf == CM_H5_XDMF_POLYVERTEX && H5Lexists(f->fid, "/xdmf/vertex_ids", H5P_DEFAULT) > 0) {
+        int rank, is_int;
+        hsize_t dims[2];
+        if ((rc = dataset_shape(f, "/xdmf/vertex_ids", &rank, dims, &is_int, err)) == CM_OK)
+            f->vertex_ids_len = (size_t)dims[0];
+    }
+    for (size_t i = 0; i < kept && rc == CM_OK; i++) {
+        hid_t sg = H5Gopen2(g, ks[i].name, H5P_DEFAULT);
+        rc = sg < 0 ? h5_fail(err, f->path, "opening /steps/%s", ks[i].name) : relist_step(f, sg, &ks[i], err);
+        if (sg >= 0)
+            H5Gclose(sg);
+        f->last_step = ks[i].step;
+    }
+    H5Gclose(g);
+    free(ks);
+    return rc;
+}
+
+int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step, cm_h5 **out, cm_error *err)
+{
+    *out = NULL;
+    cm_h5 *f;
+    int rc = file_new(path, def, &f, err);
+    if (rc != CM_OK)
+        return rc;
+    if ((rc = open_existing(f, path, 1, err)) == CM_OK && (rc = reopen_steps(f, keep_through_step, err)) == CM_OK &&
+        (rc = cm_h5_flush(f, err)) == CM_OK && f->xdmf != CM_H5_XDMF_NONE)
+        rc = write_xdmf(f, err);
+    if (rc != CM_OK) {
+        cm_h5_close(&f, NULL);
+        return rc;
+    }
+    *out = f;
+    return CM_OK;
+}
+
+int cm_h5_series_reopen(cm_h5 *f, const char *path, const char *const *columns, int ncols, const char *csv_path,
+                        long rows, cm_h5_series **out, cm_error *err)
+{
+    *out = NULL;
+    if (!abs_path_ok(path) || ncols < 1 || !columns || rows < 0)
+        return cm_fail(err, CM_ERR_RANGE, "%s: series %s: bad arguments to reopen", f->path, path ? path : "(null)");
+    cm_h5_series *s = calloc(1, sizeof *s);
+    if (!s || !(s->path = strdup(path))) {
+        free(s);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: series %s: out of memory", f->path, path);
+    }
+    s->file = f;
+    s->ncols = ncols;
+    s->dset = s->memtype = H5I_INVALID_HID;
+    int rc = CM_OK;
+    if ((s->dset = H5Dopen2(f->fid, path, H5P_DEFAULT)) < 0)
+        rc = h5_fail(err, f->path, "opening series %s", path);
+    hid_t ft = rc == CM_OK ? H5Dget_type(s->dset) : H5I_INVALID_HID;
+    if (rc == CM_OK && (ft < 0 || H5Tget_class(ft) != H5T_COMPOUND || H5Tget_nmembers(ft) != ncols))
+        rc = cm_fail(err, CM_ERR_PARSE, "%s: series %s is not a table of %d columns", f->path, path, ncols);
+    if (ft >= 0)
+        H5Tclose(ft);
+    if (rc == CM_OK && (s->memtype = H5Tcreate(H5T_COMPOUND, sizeof(double) * (size_t)ncols)) < 0)
+        rc = h5_fail(err, f->path, "series %s: row type", path);
+    for (int i = 0; i < ncols && rc == CM_OK; i++)
+        if (H5Tinsert(s->memtype, columns[i], sizeof(double) * (size_t)i, H5T_NATIVE_DOUBLE) < 0)
+            rc = h5_fail(err, f->path, "series %s: column %s", path, columns[i]);
+    hsize_t have = 0, want = (hsize_t)rows;
+    if (rc == CM_OK) {
+        hid_t sp = H5Dget_space(s->dset);
+        if (sp < 0 || H5Sget_simple_extent_dims(sp, &have, NULL) != 1)
+            rc = h5_fail(err, f->path, "series %s: extent", path);
+        if (sp >= 0)
+            H5Sclose(sp);
+    }
+    if (rc == CM_OK && have < want)
+        rc = cm_fail(err, CM_ERR_IO, "%s: series %s holds %llu rows, the checkpoint expects %ld", f->path, path,
+                     (unsigned long long)have, rows);
+    if (rc == CM_OK && H5Dset_extent(s->dset, &want) < 0)
+        rc = h5_fail(err, f->path, "series %s: cutting back to %ld rows", path, rows);
+    if (rc == CM_OK && csv_path)
+        rc = cm_csv_reopen(csv_path, ncols, rows, &s->csv, err);
+    if (rc == CM_OK)
+        rc = cm_h5_flush(f, err);
+    if (rc != CM_OK) {
+        cm_csv_close(&s->csv, NULL);
+        if (s->dset >= 0)
+            H5Dclose(s->dset);
+        if (s->memtype >= 0)
+            H5Tclose(s->memtype);
+        free(s->path);
+        free(s);
+        return rc;
+    }
+    s->rows = rows;
+    s->next = f->series;
+    f->series = s;
+    *out = s;
+    return CM_OK;
+}
+
+/* ---- raw typed arrays ---------------------------------------------------------- */
+
+static void h5_types(cm_h5_type t, hid_t *ftype, hid_t *mtype)
+{
+    switch (t) {
+    case CM_H5_I32: *ftype = H5T_STD_I32LE, *mtype = H5T_NATIVE_INT32; break;
+    case CM_H5_U32: *ftype = H5T_STD_U32LE, *mtype = H5T_NATIVE_UINT32; break;
+    case CM_H5_I64: *ftype = H5T_STD_I64LE, *mtype = H5T_NATIVE_INT64; break;
+    case CM_H5_U64: *ftype = H5T_STD_U64LE, *mtype = H5T_NATIVE_UINT64; break;
+    default: *ftype = H5T_IEEE_F64LE, *mtype = H5T_NATIVE_DOUBLE; break;
+    }
+}
+
+int cm_h5_write_array(cm_h5 *f, const char *path, cm_h5_type type, const void *data, size_t n, int ncomp,
+                      cm_error *err)
+{
+    if (!abs_path_ok(path))
+        return cm_fail(err, CM_ERR_RANGE, "%s: dataset path \"%s\" must be absolute, with components of "
+                       "letters, digits and \"_.-+\"", f->path, path ? path : "(null)");
+    hid_t ft, mt;
+    h5_types(type, &ft, &mt);
+    return write_typed(f, f->fid, path, path, ft, mt, data, n, ncomp, err);
+}
+
+int cm_h5_read_array(cm_h5 *f, const char *path, cm_h5_type type, void *data, size_t n, int ncomp, cm_error *err)
+{
+    hid_t ft, mt;
+    h5_types(type, &ft, &mt);
+    hid_t d = H5Dopen2(f->fid, path, H5P_DEFAULT);
+    if (d < 0)
+        return h5_fail(err, f->path, "no dataset %s", path);
+    int rc = CM_OK;
+    hid_t s = H5Dget_space(d), t = H5Dget_type(d);
+    hsize_t dims[2] = {0, 1};
+    int rank = s < 0 ? -1 : H5Sget_simple_extent_ndims(s);
+    if (rank >= 1 && rank <= 2)
+        H5Sget_simple_extent_dims(s, dims, NULL);
+    if (t < 0 || H5Tequal(t, ft) <= 0)
+        rc = cm_fail(err, CM_ERR_PARSE, "%s: dataset %s has another element type than expected", f->path, path);
+    else if (rank != (ncomp == 1 ? 1 : 2) || dims[0] != (hsize_t)n || dims[1] != (hsize_t)ncomp)
+        rc = cm_fail(err, CM_ERR_PARSE, "%s: dataset %s is %llu x %llu, expected %zu x %d", f->path, path,
+                     (unsigned long long)dims[0], (unsigned long long)dims[1], n, ncomp);
+    else if (n > 0 && H5Dread(d, mt, H5S_ALL, H5S_ALL, H5P_DEFAULT, data) < 0)
+        rc = h5_fail(err, f->path, "reading dataset %s", path);
+    if (t >= 0)
+        H5Tclose(t);
+    if (s >= 0)
+        H5Sclose(s);
+    H5Dclose(d);
+    return rc;
 }

@@ -73,6 +73,12 @@ typedef struct cm_h5_def {
 
 cm_h5_def cm_h5_default_def(void);
 
+/* Call first in main, before any other HDF5 use: HDF5 then does not tidy up
+ * at exit (its exit-time clean-up crashed on a file whose final flush had
+ * failed, e.g. on a full disk, turning one clear error into a segfault),
+ * and prints no error stacks of its own. */
+void cm_h5_library_init(void);
+
 /* ---- File --------------------------------------------------------------- */
 
 /* Creates (truncates) the results file `path`; with def->xdmf set, the XDMF
@@ -139,5 +145,38 @@ int cm_h5_series_append(cm_h5_series *s, const double *row, cm_error *err);
 
 /* Rows appended so far. */
 long cm_h5_series_rows(const cm_h5_series *s);
+
+/* ---- Resuming a run (checkpoint/restart) --------------------------------- */
+
+/* Reopens an existing results file written by cm_h5_create to continue it:
+ * every /steps group whose step is greater than keep_through_step is
+ * deleted (a run resumed from a checkpoint rewrites them), the kept steps
+ * are listed again in the XDMF (each step dataset carries its XDMF center as
+ * the attribute "xdmf_center"), and later cm_h5_step_begin calls must follow
+ * the last kept step. def must be the one the file was created with. */
+int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step, cm_h5 **out, cm_error *err);
+
+/* Reopens the series `path` of a reopened file, cut back to its first `rows`
+ * rows, and its CSV (cut back to the header and `rows` lines). columns as
+ * for cm_h5_series_create. Fails naming the file if either holds fewer rows. */
+int cm_h5_series_reopen(cm_h5 *f, const char *path, const char *const *columns, int ncols, const char *csv_path,
+                        long rows, cm_h5_series **out, cm_error *err);
+
+/* ---- Raw typed arrays (checkpoints) --------------------------------------- */
+
+typedef enum cm_h5_type { CM_H5_F64 = 0, CM_H5_I32, CM_H5_U32, CM_H5_I64, CM_H5_U64 } cm_h5_type;
+
+/* Opens an existing HDF5 file for cm_h5_write_array / cm_h5_read_array
+ * (writable: read-write, else read-only). Close with cm_h5_close. */
+int cm_h5_open(const char *path, int writable, cm_h5 **out, cm_error *err);
+
+/* Writes a new dataset at absolute `path`, n rows of ncomp values of `type`
+ * (stored little-endian, bit-exact; 1-D when ncomp == 1). */
+int cm_h5_write_array(cm_h5 *f, const char *path, cm_h5_type type, const void *data, size_t n, int ncomp,
+                      cm_error *err);
+/* Reads dataset `path` into data; its type and shape must be exactly those
+ * given (n rows, ncomp columns), else an error names the file and dataset. */
+int cm_h5_read_array(cm_h5 *f, const char *path, cm_h5_type type, void *data, size_t n, int ncomp,
+                     cm_error *err);
 
 #endif

@@ -11,6 +11,7 @@ int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
     if ((rc = cm_scene_string_opt(s, "run.name", "run", c->name, sizeof c->name, err)) ||
         (rc = cm_scene_double(s, "run.end_time", 0.0, 1e6, &c->end_time, err)) ||
         (rc = cm_scene_double_opt(s, "run.progress_every", 0.0, 3600.0, 2.0, &c->progress_every, err)) ||
+        (rc = cm_scene_double_opt(s, "run.checkpoint_every", 0.0, 1e6, 0.0, &c->checkpoint_every, err)) ||
         (rc = cm_scene_double(s, "coupling.dt", 1e-12, 1.0, &c->dt, err)) ||
         (rc = cm_scene_int_opt(s, "coupling.exchange_every", 1, 100000, 1, &every, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.stall_timeout", 0.1, 60.0, 1.0, &c->stall_timeout, err)) ||

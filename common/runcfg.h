@@ -10,6 +10,8 @@ typedef struct cm_run_config {
     char name[64];         /* run.name: label for logs and output files */
     double end_time;       /* run.end_time, s: simulated time at which the DEM side ends the run */
     double progress_every; /* run.progress_every, s of wall time between progress lines (default 2) */
+    double checkpoint_every; /* run.checkpoint_every, s of simulated time between checkpoints (default 0:
+                              only when a server is interrupted by SIGINT/SIGTERM) */
     double dt;             /* coupling.dt, s: the DEM time step */
     int exchange_every;    /* coupling.exchange_every: DEM steps per exchange (default 1) */
     double stall_timeout;  /* coupling.stall_timeout, s: peer silent this long counts as dead (default 1) */
@@ -28,5 +30,15 @@ int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err);
 
 /* The exchange interval dt * exchange_every, s. */
 static inline double cm_run_exchange_dt(const cm_run_config *c) { return c->dt * c->exchange_every; }
+
+/* Exchanges between checkpoints: run.checkpoint_every rounded to whole
+ * exchanges (at least one), 0 when periodic checkpoints are off. */
+static inline long cm_run_checkpoint_exchanges(const cm_run_config *c)
+{
+    if (!(c->checkpoint_every > 0))
+        return 0;
+    double n = c->checkpoint_every / cm_run_exchange_dt(c) + 0.5;
+    return n < 1.0 ? 1 : n > 1e15 ? (long)1e15 : (long)n;
+}
 
 #endif

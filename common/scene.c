@@ -586,3 +586,15 @@ int cm_scene_add_override(const char *assignment, cm_error *err)
 }
 
 void cm_scene_clear_overrides(void) { g_n_overrides = 0; }
+
+uint64_t cm_scene_overrides_hash(uint64_t h)
+{
+    for (int i = 0; i < g_n_overrides; i++)
+        for (const unsigned char *c = (const unsigned char *)g_overrides[i];; c++) {
+            h ^= *c; /* the terminating 0 separates the assignments */
+            h *= 1099511628211ULL;
+            if (!*c)
+                break;
+        }
+    return h;
+}

@@ -13,6 +13,7 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #include "error.h"
 
@@ -81,5 +82,8 @@ int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err);
 enum { CM_SCENE_MAX_OVERRIDES = 64 };
 int cm_scene_add_override(const char *assignment, cm_error *err);
 void cm_scene_clear_overrides(void);
+/* Continues an FNV-1a 64 hash over the registered overrides, in order (a
+ * checkpoint's scene hash covers the file and its --set arguments). */
+uint64_t cm_scene_overrides_hash(uint64_t h);
 
 #endif

@@ -357,6 +357,12 @@ int dem_output_open(const char *dir, dem_output **out, cm_error *err);
 int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err);  /* grain states */
 int dem_output_series(dem_output *o, const dem_world *w, cm_error *err); /* one line of KE, contacts */
 void dem_output_close(dem_output **o);
+/* Resuming: reopens the files of `dir` keeping the first `frames` frames and
+ * `series_rows` series rows (what a killed run wrote after its checkpoint is
+ * dropped), to continue them. */
+int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output **out, cm_error *err);
+/* Frames and series rows written so far. */
+void dem_output_counts(const dem_output *o, long *frames, long *series_rows);
 
 /* ---- Scene ------------------------------------------------------------ */
 

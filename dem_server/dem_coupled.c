@@ -126,7 +126,17 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     const double interval = def->dt * k_steps;
     double time = 0, last_progress = cm_now(), t_start = cm_now();
     long n = 0;
-    int stop_requested = 0;
+    int stop_requested = 0, asked_checkpoint = 0;
+    if (hooks && hooks->restore) {
+        dem_coupled_state st = {.n_nodes = (int)c.nn, .x = c.x, .v = c.v};
+        if ((rc = hooks->restore(w, &st, hooks->user, err)) || (rc = dem_surface_update(w, c.x, c.v, err)))
+            goto done;
+        n = st.exchange + 1;
+        time = st.time;
+        c.w_dem = st.w_dem;
+        cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
+    }
+    const long n_first = n;
     for (;; n++) {
         int finish = stop_requested || time >= def->end_time - 0.5 * def->dt;
         dem_surface_total acc;
@@ -177,6 +187,11 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             out->info[IPC_INFO_DEM_WORK] = c.w_dem;
             out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
             out->info[IPC_INFO_BED_TOP] = def->bed_top;
+            if (def->interrupt && *def->interrupt && !asked_checkpoint) {
+                out->flags |= IPC_FLAG_CHECKPOINT; /* interrupted: checkpoint this exchange, then stop */
+                asked_checkpoint = 1;
+                cm_log_info("interrupted: asking fem_server for a checkpoint of exchange %ld", n);
+            }
         }
         if ((rc = ipc_send_commit(c.ch)))
             break;
@@ -187,9 +202,11 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         const double *q;
         if ((rc = ipc_recv(c.ch, &in, &q)))
             break;
-        uint32_t kind = in->kind;
+        uint32_t kind = in->kind, flags = in->flags;
         double wheel_x = in->info[IPC_INFO_CENTER_X];
-        stop_requested |= (in->flags & IPC_FLAG_STOP_REQUEST) != 0;
+        /* After our own request the run ends whether or not the peer
+         * checkpointed (a FEM side without checkpoints ignores it). */
+        stop_requested |= (flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
         if (kind == IPC_FRAME_DATA) {
             memcpy(c.x, q, m * sizeof *c.x);
             memcpy(c.v, q + m, m * sizeof *c.v);
@@ -210,6 +227,12 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
 
         if (hooks && hooks->after_exchange && (rc = hooks->after_exchange(w, hooks->user, n, err)))
             goto done;
+        if ((flags & IPC_FLAG_CHECKPOINT) && hooks && hooks->checkpoint) {
+            dem_coupled_state st = {.exchange = n, .time = time, .w_dem = c.w_dem, .n_nodes = (int)c.nn,
+                                    .x = c.x, .v = c.v};
+            if ((rc = hooks->checkpoint(w, &st, hooks->user, err)))
+                goto done;
+        }
         if (n % 100 == 0 && (rc = check_health(w, def, err)))
             goto done;
         double now = cm_now();
@@ -217,7 +240,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             last_progress = now;
             dem_stats st;
             dem_world_stats(w, &st);
-            double steps = (double)(n + 1) * k_steps;
+            double steps = (double)(n + 1 - n_first) * k_steps;
             cm_log_info("t = %.4f s  %.0f steps/s (%.2f M grain-steps/s)  grains %d  surface contacts %.0f", time,
                         steps / (now - t_start), 1e-6 * steps * st.grains / (now - t_start), st.grains,
                         acc.contacts / (double)k_steps);
@@ -232,6 +255,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     cm_log_info("coupled run finished: %ld exchanges, t = %.4f s; waited for the FEM %.1f s of %.1f s; interface "
                 "work seen by the DEM %.6g J",
                 n, time, st.wait_recv_s + st.wait_send_s, cm_now() - t_start, c.w_dem);
+    cm_log_info("final state: dem_world_hash %016llx", (unsigned long long)dem_world_hash(w));
 done:
     if (rc && c.ch && rc != DEM_COUPLED_PEER)
         ipc_fail(c.ch, "dem_server: %s", err->msg);

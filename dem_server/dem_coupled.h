@@ -24,14 +24,32 @@ typedef struct dem_coupled_def {
     double max_overlap;     /* stop when a grain overlap exceeds this fraction of the radius (0 = never) */
     double bed_height;      /* m, undisturbed bed surface, sent for sinkage (0 = none) */
     double bed_top;         /* m, highest grain top z + r, sent for placing the wheel (0 = none) */
-    volatile sig_atomic_t *stop_flag;
+    volatile sig_atomic_t *stop_flag;  /* raised: stop at once (waits are abandoned) */
+    volatile sig_atomic_t *interrupt;  /* raised: ask fem_server for a checkpoint of the next exchange,
+                                          then end the run cleanly (SIGINT/SIGTERM); may be NULL */
     dem_window *window;     /* terrain window moved with the wheel every exchange (NULL = none) */
     dem_window_def window_def; /* its keys (also the footprint check's expected sinkage without a window) */
 } dem_coupled_def;
 
+/* The coupled loop's own state, saved in checkpoints besides the world's. */
+typedef struct dem_coupled_state {
+    long exchange;   /* exchanges completed (the last one's number) */
+    double time;     /* s, simulated time of the loop */
+    double w_dem;    /* J, interface work seen by the DEM */
+    int n_nodes;     /* surface nodes */
+    double *x, *v;   /* 3 n_nodes: the surface as last received (m, m/s) */
+} dem_coupled_state;
+
 typedef struct dem_coupled_hooks {
     /* Called after every exchange (output, diagnostics); nonzero stops the run. */
     int (*after_exchange)(dem_world *w, void *user, long exchange, cm_error *err);
+    /* Called when fem_server flags a checkpoint, after after_exchange: saves
+     * the world and the loop state (NULL: checkpoints are not written). */
+    int (*checkpoint)(dem_world *w, const dem_coupled_state *st, void *user, cm_error *err);
+    /* Resuming: called once the surface is installed, before the first
+     * exchange; fills the world and st (st->x, st->v point to the loop's
+     * arrays of st->n_nodes nodes). NULL: a fresh run. */
+    int (*restore)(dem_world *w, dem_coupled_state *st, void *user, cm_error *err);
     void *user;
 } dem_coupled_hooks;
 

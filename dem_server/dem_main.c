@@ -2,6 +2,7 @@
  *
  *   dem_server --scene FILE --shm NAME [--out DIR] [--threads N]   coupled with fem_server
  *   dem_server --scene FILE --standalone [--out DIR] [--threads N] walls only, e.g. to settle a bed
+ *   --resume DIR: continue the coupled run of DIR from its last checkpoint
  *
  * Builds the world of the scene's `dem` section: materials, walls, the
  * settled bed (reloaded from dem.bed.file when its parameters match, settled
@@ -20,20 +21,36 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include "ckpt.h"
 #include "dem.h"
+#include "dem_checkpoint.h"
 #include "dem_coupled.h"
 #include "dem_window.h"
+#include "h5io.h"
 #include "log.h"
 #include "runcfg.h"
 #include "scene.h"
 #include "timer.h"
 
-static volatile sig_atomic_t g_stop;
-static void on_signal(int sig) { g_stop = sig; }
+/* SIGINT/SIGTERM: while the coupled loop can checkpoint (g_graceful), the
+ * run asks fem_server for a checkpoint of the next exchange and ends cleanly
+ * (g_interrupt); before that, or if that has not ended the run within 10 s,
+ * everything stops at once (g_stop: every wait returns). */
+static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
+static void on_signal(int sig)
+{
+    if (!g_interrupt && g_graceful)
+        alarm(10);
+    g_interrupt = sig;
+    if (!g_graceful)
+        g_stop = sig;
+}
+static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
 
 typedef struct options {
-    const char *scene, *shm, *out;
+    const char *scene, *shm, *out, *resume;
     int threads;
     int standalone;
 } options;
@@ -44,6 +61,12 @@ typedef struct output_ctx {
     long last_frame, last_series;
     int failed;
     cm_error err;
+    /* checkpoints */
+    const char *dir;          /* output folder; checkpoints in dir/checkpoint */
+    uint64_t scene_hash;
+    dem_window *window; /* saved in checkpoints (NULL = none) */
+    const char *resume_path;  /* checkpoint to resume from, NULL for a fresh run */
+    long resume_exchange;
 } output_ctx;
 
 /* Writes grain frames and series lines at the configured step intervals. */
@@ -86,6 +109,35 @@ static int after_exchange(dem_world *w, void *user, long exchange, cm_error *err
 {
     (void)exchange;
     return write_outputs(w, user, err);
+}
+
+static int write_checkpoint(dem_world *w, const dem_coupled_state *st, void *user, cm_error *err)
+{
+    output_ctx *c = user;
+    dem_ckpt_outputs o = {.last_frame = c->last_frame, .last_series = c->last_series};
+    dem_output_counts(c->out, &o.frames, &o.series_rows);
+    double t0 = cm_now();
+    int rc = dem_checkpoint_write(c->dir, w, c->window, st, &o, c->scene_hash, err);
+    if (rc == CM_OK)
+        cm_log_info("checkpoint of exchange %ld written (%.2f s)", st->exchange, cm_now() - t0);
+    return rc;
+}
+
+/* Resuming: the world and loop state, then the outputs cut back to the checkpoint. */
+static int restore_checkpoint(dem_world *w, dem_coupled_state *st, void *user, cm_error *err)
+{
+    output_ctx *c = user;
+    dem_ckpt_outputs o;
+    int rc = dem_checkpoint_read(c->resume_path, c->resume_exchange, w, c->window, st, &o, c->scene_hash, err);
+    if (rc == CM_OK)
+        rc = cm_ckpt_adopt(c->resume_path, err);
+    if (rc == CM_OK && c->dir)
+        rc = dem_output_reopen(c->dir, o.frames, o.series_rows, &c->out, err);
+    c->last_frame = o.last_frame;
+    c->last_series = o.last_series;
+    if (rc == CM_OK)
+        cm_log_info("resuming from %s (exchange %ld)", c->resume_path, c->resume_exchange);
+    return rc;
 }
 
 static int material_index(cm_scene *s, const dem_config *cfg, const char *key, int *out, cm_error *err)
@@ -168,14 +220,28 @@ static int run(const options *o)
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */
     if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
-        cm_log_error("%s", err.msg);
+        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for fem_server", (int)g_stop);
+        else
+            cm_log_error("%s", err.msg);
         exit_code = g_stop ? 128 + (int)g_stop : 3;
         goto cleanup;
     }
 
     octx.cfg = &cfg;
-    if (cfg.output_dir[0] && (rc = dem_output_open(cfg.output_dir, &octx.out, &err)))
+    octx.dir = cfg.output_dir[0] ? cfg.output_dir : NULL;
+    if ((rc = cm_ckpt_file_hash(o->scene, &octx.scene_hash, &err)))
         goto fail;
+    octx.scene_hash = cm_scene_overrides_hash(octx.scene_hash);
+    if (o->resume) {
+        char fem_path[1100];
+        static char dem_path[1100];
+        if ((rc = cm_ckpt_choose(o->resume, &octx.resume_exchange, dem_path, fem_path, sizeof dem_path, &err)))
+            goto fail;
+        octx.resume_path = dem_path;
+    } else if (octx.dir && (rc = dem_output_open(cfg.output_dir, &octx.out, &err))) {
+        goto fail;
+    }
     double t0 = cm_now(), bed_height = 0, bed_top = 0;
     if (cfg.has_bed) {
         bool loaded = false;
@@ -199,7 +265,7 @@ static int run(const options *o)
     if ((rc = add_listed_grains(scene, &cfg, w, &err)))
         goto fail;
     /* The run starts here: its first frame is the initial state. */
-    if (octx.out && ((rc = dem_output_frame(octx.out, w, &err)) || (rc = dem_output_series(octx.out, w, &err))))
+    if (octx.out && !o->resume && ((rc = dem_output_frame(octx.out, w, &err)) || (rc = dem_output_series(octx.out, w, &err))))
         goto fail;
     {
         dem_stats s0;
@@ -238,8 +304,17 @@ static int run(const options *o)
         def.bed_top = bed_top;
         def.window = window;
         def.window_def = cfg.window;
-        dem_coupled_hooks hooks = {.after_exchange = after_exchange, .user = &octx};
+        octx.window = window;
+        def.interrupt = &g_interrupt;
+        dem_coupled_hooks hooks = {.after_exchange = after_exchange,
+                                   .checkpoint = octx.dir ? write_checkpoint : NULL,
+                                   .restore = o->resume ? restore_checkpoint : NULL,
+                                   .user = &octx};
+        g_graceful = octx.dir != NULL; /* from here a signal asks for a checkpoint */
+        if (g_interrupt && g_graceful) /* one that came during the set-up */
+            alarm(10);
         rc = dem_run_coupled(w, ch, &def, &hooks, &err);
+        g_graceful = 0;
         ch = NULL; /* closed by the run */
         if (rc == DEM_COUPLED_PEER) {
             cm_log_error("%s", err.msg);
@@ -248,7 +323,7 @@ static int run(const options *o)
         }
         if (rc)
             goto fail;
-        exit_code = 0;
+        exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
         if (window) {
             const dem_window_state *ws = dem_window_get_state(window);
             cm_log_info("window: %d removals (%ld grains), %d stretches appended (%ld grains), lowest seam solid "
@@ -279,7 +354,7 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
-                    "                  [--set KEY=VALUE]...\n"
+                    "                  [--resume DIR] [--set KEY=VALUE]...\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");
     return 2;
@@ -298,6 +373,8 @@ int main(int argc, char **argv)
             o.out = v, i++;
         else if (strcmp(a, "--threads") == 0 && v)
             o.threads = atoi(v), i++;
+        else if (strcmp(a, "--resume") == 0 && v)
+            o.resume = o.out = v, i++;
         else if (strcmp(a, "--standalone") == 0)
             o.standalone = 1;
         else if (strcmp(a, "--set") == 0 && v) {
@@ -310,14 +387,17 @@ int main(int argc, char **argv)
         } else
             return usage();
     }
-    if (!o.scene || (!o.shm && !o.standalone))
+    if (!o.scene || (!o.shm && !o.standalone) || (o.resume && o.standalone))
         return usage();
     cm_log_set_tag("dem");
+    cm_h5_library_init();
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+    sa.sa_handler = on_alarm;
+    sigaction(SIGALRM, &sa, NULL);
     if (o.out && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

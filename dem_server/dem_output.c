@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "dem_world.h"
 
@@ -17,6 +18,7 @@ struct dem_output {
     hid_t h5;
     FILE *series;
     int n_frames, cap_frames;
+    long series_rows;
     double *times;
     int *counts;
 };
@@ -156,8 +158,6 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
         hid_t sp = H5Screate(H5S_SCALAR);
         hid_t at = H5Acreate2(grp, "time", H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
         bad = at < 0 || H5Awrite(at, H5T_NATIVE_DOUBLE, &w->time) < 0;
-        if (at >= 0)
-            H5Aclose(at);
         H5Sclose(sp);
     }
     if (grp >= 0)
@@ -184,6 +184,7 @@ int dem_output_series(dem_output *o, const dem_world *w, cm_error *err)
                 s.contacts_gg, s.contacts_gw, s.contacts_gs, s.max_overlap, s.grains, s.frozen) < 0 ||
         fflush(o->series) != 0)
         return cm_fail(err, CM_ERR_IO, "%s/dem_series.csv: write failed", o->dir);
+    o->series_rows++;
     return CM_OK;
 }
 
@@ -200,4 +201,105 @@ void dem_output_close(dem_output **op)
     free(o->counts);
     free(o);
     *op = NULL;
+}
+
+void dem_output_counts(const dem_output *o, long *frames, long *series_rows)
+{
+    *frames = o ? o->n_frames : 0;
+    *series_rows = o ? o->series_rows : 0;
+}
+
+/* Keeps the header and the first `rows` lines of the series, appends after them. */
+static int reopen_series(dem_output *o, long rows, cm_error *err)
+{
+    char path[1100];
+    snprintf(path, sizeof path, "%s/dem_series.csv", o->dir);
+    if (!(o->series = fopen(path, "r+")))
+        return cm_fail(err, CM_ERR_IO, "cannot reopen %s: %s", path, strerror(errno));
+    long lines = 0;
+    int ch;
+    while (lines < rows + 1 && (ch = getc(o->series)) != EOF)
+        lines += ch == '\n';
+    if (lines < rows + 1)
+        return cm_fail(err, CM_ERR_IO, "%s holds %ld rows, the checkpoint expects %ld", path, lines ? lines - 1 : 0,
+                       rows);
+    long pos = ftell(o->series);
+    if (pos < 0 || fflush(o->series) != 0 || ftruncate(fileno(o->series), pos) != 0 ||
+        fseek(o->series, pos, SEEK_SET) != 0)
+        return cm_fail(err, CM_ERR_IO, "cutting %s back to %ld rows: %s", path, rows, strerror(errno));
+    o->series_rows = rows;
+    return CM_OK;
+}
+
+int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output **out, cm_error *err)
+{
+    *out = NULL;
+    dem_output *o = calloc(1, sizeof *o);
+    if (!o)
+        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", dir);
+    o->h5 = H5I_INVALID_HID;
+    snprintf(o->dir, sizeof o->dir, "%s", dir);
+    char path[1100];
+    snprintf(path, sizeof path, "%s/dem_grains.h5", dir);
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    int rc = CM_OK;
+    int cap = frames > 64 ? (int)frames : 64;
+    o->times = malloc((size_t)cap * sizeof *o->times);
+    o->counts = malloc((size_t)cap * sizeof *o->counts);
+    o->cap_frames = cap;
+    if (!o->times || !o->counts) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", dir);
+        goto done;
+    }
+    if ((o->h5 = H5Fopen(path, H5F_ACC_RDWR, H5P_DEFAULT)) < 0) {
+        rc = cm_fail(err, CM_ERR_IO, "%s: cannot reopen the grain frames to resume", path);
+        goto done;
+    }
+    /* Frames past the checkpoint go; the kept ones are listed again. */
+    for (long k = frames;; k++) {
+        char name[64];
+        snprintf(name, sizeof name, "frame_%06ld", k);
+        if (H5Lexists(o->h5, name, H5P_DEFAULT) <= 0)
+            break;
+        if (H5Ldelete(o->h5, name, H5P_DEFAULT) < 0) {
+            rc = cm_fail(err, CM_ERR_IO, "%s: cannot delete %s beyond the checkpoint", path, name);
+            goto done;
+        }
+    }
+    for (long k = 0; k < frames; k++) {
+        char name[64];
+        snprintf(name, sizeof name, "frame_%06ld/position", k);
+        hid_t ds = H5Dopen2(o->h5, name, H5P_DEFAULT);
+        hid_t sp = ds >= 0 ? H5Dget_space(ds) : H5I_INVALID_HID;
+        hsize_t dims[2] = {0, 0};
+        int bad = sp < 0 || H5Sget_simple_extent_dims(sp, dims, NULL) != 2;
+        if (sp >= 0)
+            H5Sclose(sp);
+        if (ds >= 0)
+            H5Dclose(ds);
+        snprintf(name, sizeof name, "frame_%06ld", k);
+        hid_t a = bad ? H5I_INVALID_HID : H5Aopen_by_name(o->h5, name, "time", H5P_DEFAULT, H5P_DEFAULT);
+        bad = bad || a < 0 || H5Aread(a, H5T_NATIVE_DOUBLE, &o->times[k]) < 0;
+        if (a >= 0)
+            H5Aclose(a);
+        if (bad) {
+            rc = cm_fail(err, CM_ERR_IO, "%s: frame %ld of the checkpoint is missing or unreadable", path, k);
+            goto done;
+        }
+        o->counts[k] = (int)dims[0];
+    }
+    o->n_frames = (int)frames;
+    if (H5Fflush(o->h5, H5F_SCOPE_GLOBAL) < 0) {
+        rc = cm_fail(err, CM_ERR_IO, "%s: flush failed", path);
+        goto done;
+    }
+    if ((rc = write_xdmf(o, err)) == CM_OK)
+        rc = reopen_series(o, series_rows, err);
+done:
+    if (rc) {
+        dem_output_close(&o);
+        return rc;
+    }
+    *out = o;
+    return CM_OK;
 }

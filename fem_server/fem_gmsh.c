@@ -487,7 +487,7 @@ int fem_mesh_read_gmsh(const char *path, fem_mesh *m, cm_error *err)
 {
     FILE *fp = fopen(path, "rb");
     if (!fp)
-        return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
+        return cm_fail(err, CM_ERR_IO, "cannot open the Gmsh mesh %s (fem.mesh.file): %s", path, strerror(errno));
     if (fseek(fp, 0, SEEK_END) != 0) {
         fclose(fp);
         return cm_fail(err, CM_ERR_IO, "%s: cannot seek", path);

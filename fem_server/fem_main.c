@@ -2,6 +2,7 @@
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
+ *   --resume DIR: continue the run of DIR from its last checkpoint
  *
  * Builds the tire model of the scene's `fem` section, solves the initial
  * static state (paper sec. 3.3), creates the exchange segment and publishes
@@ -10,7 +11,10 @@
  * prescribes (sinkage, then travel at slip), advances the deformation over
  * the interval and answers the new interface positions and velocities.
  * Records traction, load, sinkage and energies every exchange and prints the
- * traction summary over the detected steady part at the end. */
+ * traction summary over the detected steady part at the end.
+ * Checkpoints (ipc/PROTOCOL.md): this side decides when both save the state
+ * after an exchange: every run.checkpoint_every, and when either side is
+ * interrupted (SIGINT/SIGTERM; the run then ends cleanly). */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -18,9 +22,12 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include "ckpt.h"
 #include "drive.h"
 #include "fem.h"
+#include "fem_checkpoint.h"
 #include "h5io.h"
 #include "ipc.h"
 #include "log.h"
@@ -28,11 +35,22 @@
 #include "steady.h"
 #include "timer.h"
 
-static volatile sig_atomic_t g_stop;
-static void on_signal(int sig) { g_stop = sig; }
+/* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
+ * is checkpointed and the run ends cleanly (g_interrupt); before that, or if
+ * that has not ended the run within 10 s, everything stops at once (g_stop). */
+static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
+static void on_signal(int sig)
+{
+    if (!g_interrupt && g_graceful)
+        alarm(10);
+    g_interrupt = sig;
+    if (!g_graceful)
+        g_stop = sig;
+}
+static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
 
 typedef struct options {
-    const char *scene, *shm, *out, *export_mesh;
+    const char *scene, *shm, *out, *export_mesh, *resume;
 } options;
 
 /* Columns of the time series (fem.h5:/series and traction.csv). */
@@ -120,7 +138,7 @@ static int run(const options *o)
     cm_h5_series *series = NULL;
     double *x_prev = NULL, *x_now = NULL, *v_now = NULL;
     series_buf travel = {0};
-    int exit_code = 1, rc;
+    int exit_code = 1, rc, clean_stop = 0;
 
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
@@ -132,7 +150,19 @@ static int run(const options *o)
     static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
         goto fail;
-    snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->export_mesh ? "" : o->out);
+    /* Resuming, the results files are reopened after the checkpoint is read. */
+    snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->export_mesh || o->resume ? "" : o->out);
+    uint64_t scene_hash = 0;
+    long resume_exchange = -1;
+    char ckpt_path[1100] = "";
+    if ((rc = cm_ckpt_file_hash(o->scene, &scene_hash, &err)))
+        goto fail;
+    scene_hash = cm_scene_overrides_hash(scene_hash);
+    if (o->resume) {
+        char dem_path[1100];
+        if ((rc = cm_ckpt_choose(o->resume, &resume_exchange, dem_path, ckpt_path, sizeof ckpt_path, &err)))
+            goto fail;
+    }
 
     double t0 = cm_now();
     if ((rc = fem_create(&cfg, &model, &err)))
@@ -188,9 +218,37 @@ static int run(const options *o)
     memcpy(x_prev, ipc_surface_nodes(ch), 3 * (size_t)nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", nn, nt, o->shm);
     if ((rc = ipc_accept(ch))) {
-        cm_log_error("%s", ipc_error(ch));
+        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_stop);
+        else
+            cm_log_error("%s", ipc_error(ch));
         exit_code = 3;
         goto cleanup;
+    }
+
+    const double interval = cm_run_exchange_dt(&rc_cfg);
+    double w_fem = 0, max_force_mismatch = 0, max_moment_mismatch = 0;
+    long n = 0, series_rows = 0;
+    if (o->resume) {
+        fem_ckpt_run cr = {.drive = &ds, .n_nodes = nn, .x_prev = x_prev};
+        rc = fem_checkpoint_read(ckpt_path, resume_exchange, model, &cr, scene_hash, o->out, &err);
+        if (rc == CM_OK)
+            rc = cm_ckpt_adopt(ckpt_path, &err);
+        if (rc == CM_OK) {
+            series_free(&travel);
+            travel = (series_buf){cr.travel[0], cr.travel[1], cr.travel[2], cr.travel[3], cr.travel_n, cr.travel_n};
+        } else {
+            for (int k = 0; k < 4; k++)
+                free(cr.travel[k]);
+        }
+        if (rc || (rc = set_wheel(model, &ds, &err)))
+            goto fail;
+        w_fem = cr.w_fem;
+        max_force_mismatch = cr.max_force_mismatch;
+        max_moment_mismatch = cr.max_moment_mismatch;
+        series_rows = cr.series_rows;
+        n = resume_exchange + 1;
+        cm_log_info("resuming from %s after exchange %ld (t = %.6f s)", ckpt_path, resume_exchange, fem_time(model));
     }
 
     /* Outputs. */
@@ -198,15 +256,20 @@ static int run(const options *o)
     snprintf(path, sizeof path, "%s/wheel.h5", o->out);
     snprintf(csv, sizeof csv, "%s/traction.csv", o->out);
     cm_h5_def hdef = cm_h5_default_def();
-    if ((rc = cm_h5_create(path, &hdef, &h5, &err)) ||
-        (rc = cm_h5_series_create(h5, "/series", k_columns, NCOL, csv, &series, &err)))
+    if (o->resume ? ((rc = cm_h5_reopen(path, &hdef, -1, &h5, &err)) ||
+                     (rc = cm_h5_series_reopen(h5, "/series", k_columns, NCOL, csv, series_rows, &series, &err)))
+                  : ((rc = cm_h5_create(path, &hdef, &h5, &err)) ||
+                     (rc = cm_h5_series_create(h5, "/series", k_columns, NCOL, csv, &series, &err))))
         goto fail;
 
-    const double interval = cm_run_exchange_dt(&rc_cfg);
-    double w_fem = 0, w_dem_last = 0, max_force_mismatch = 0, max_moment_mismatch = 0;
+    const long ckpt_every = cm_run_checkpoint_exchanges(&rc_cfg);
+    double w_dem_last = 0; /* J, the DEM's interface work in the last frame, for the summary */
     double last_progress = cm_now(), loop_t0 = cm_now();
-    long n = 0;
-    int finished = 0;
+    const long n_first = n;
+    int finished = 0, stop_sent = 0;
+    g_graceful = 1; /* from here a signal asks for a checkpoint */
+    if (g_interrupt)
+        alarm(10);
     for (;; n++) {
         const ipc_frame_head *in;
         const double *f;
@@ -225,6 +288,11 @@ static int run(const options *o)
         }
         double time = in->time, info[IPC_INFO_LEN];
         memcpy(info, in->info, sizeof info);
+        /* A checkpoint of this exchange: periodic, or either side interrupted
+         * (then the run stops after it). Not once the drive is done: the run
+         * ends at the next exchange anyway. */
+        int interrupted = (g_interrupt || (in->flags & IPC_FLAG_CHECKPOINT)) && !stop_sent;
+        int checkpoint = (interrupted || (ckpt_every > 0 && (n + 1) % ckpt_every == 0)) && ds.phase != DRIVE_DONE;
 
         /* Conservation: nodal forces against the contact totals (eq. 42 keeps
          * resultant and moment); positions are those the DEM saw, moments
@@ -301,8 +369,12 @@ static int run(const options *o)
         out->info[IPC_INFO_OMEGA] = ds.omega;
         out->info[IPC_INFO_ANGLE] = ds.angle;
         out->info[IPC_INFO_FEM_WORK] = w_fem;
-        if (ds.phase == DRIVE_DONE)
+        if (ds.phase == DRIVE_DONE || interrupted)
             out->flags |= IPC_FLAG_STOP_REQUEST;
+        stop_sent |= interrupted;
+        checkpoint = checkpoint && ds.phase != DRIVE_DONE;
+        if (checkpoint)
+            out->flags |= IPC_FLAG_CHECKPOINT;
         if ((rc = ipc_send_commit(ch)))
             break;
 
@@ -326,11 +398,23 @@ static int run(const options *o)
             goto fail;
         }
         /* Tire snapshots: fem_advance writes one every fem.output.every calls. */
+        if (checkpoint) {
+            fem_ckpt_run cr = {.exchange = n, .drive = &ds, .w_fem = w_fem,
+                               .max_force_mismatch = max_force_mismatch, .max_moment_mismatch = max_moment_mismatch,
+                               .n_nodes = nn, .x_prev = x_prev, .travel_n = travel.n,
+                               .travel = {travel.th, travel.tr, travel.tp, travel.sink},
+                               .series_rows = cm_h5_series_rows(series)};
+            double t_ck = cm_now();
+            if ((rc = fem_checkpoint_write(o->out, model, &cr, scene_hash, &err)))
+                goto fail;
+            cm_log_info("checkpoint of exchange %ld written (t = %.6f s, %.2f s)%s", n, time + interval,
+                        cm_now() - t_ck, interrupted ? "; stopping: resume with ./run --resume DIR" : "");
+        }
 
         double now = cm_now();
         if (rc_cfg.progress_every > 0 && now - last_progress >= rc_cfg.progress_every) {
             last_progress = now;
-            double rate = (double)(n + 1) / (now - loop_t0);
+            double rate = (double)(n + 1 - n_first) / (now - loop_t0);
             double remaining = (rc_cfg.end_time - (time + interval)) / interval;
             if (ds.phase == DRIVE_TRAVEL && ds.velocity[0] > 0) {
                 double by_travel = (drive.travel_distance - ds.travelled) / ds.velocity[0] / interval;
@@ -342,6 +426,7 @@ static int run(const options *o)
                         th - fabs(tr), 1e3 * sinkage);
         }
     }
+    g_graceful = 0;
     if (!finished) {
         cm_log_error("%s", ipc_error(ch));
         exit_code = g_stop ? 128 + (int)g_stop : 3;
@@ -378,7 +463,9 @@ static int run(const options *o)
                     drive.target_load);
     }
     cm_log_info("results: %s/traction.csv, %s/wheel.h5", o->out, o->out);
-    exit_code = 0;
+    cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(model));
+    exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+    clean_stop = 1;
     goto cleanup;
 
 fail:
@@ -389,7 +476,8 @@ fail:
 cleanup:
     if (h5 && cm_h5_close(&h5, &err))
         cm_log_error("%s", err.msg);
-    ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
+    /* interrupted but finished cleanly (checkpoint written, finish answered): not a failure for the peer */
+    ipc_close(&ch, exit_code == 0 || clean_stop ? IPC_OK : IPC_ERR_PEER_FAILED);
     fem_destroy(&model);
     cm_scene_close(&scene);
     series_free(&travel);
@@ -401,7 +489,7 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--set KEY=VALUE]...\n"
+    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
@@ -421,6 +509,8 @@ int main(int argc, char **argv)
             o.shm = argv[++i];
         else if (strcmp(argv[i], "--out") == 0 && i + 1 < argc)
             o.out = argv[++i];
+        else if (strcmp(argv[i], "--resume") == 0 && i + 1 < argc)
+            o.resume = o.out = argv[++i];
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
             o.export_mesh = argv[++i];
         else if (strcmp(argv[i], "--set") == 0 && i + 1 < argc) {
@@ -435,11 +525,14 @@ int main(int argc, char **argv)
     if (!o.scene || (!o.shm && !o.export_mesh))
         return usage();
     cm_log_set_tag("fem");
+    cm_h5_library_init();
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+    sa.sa_handler = on_alarm;
+    sigaction(SIGALRM, &sa, NULL);
     if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

@@ -21,7 +21,9 @@ struct fem_output {
 static const char *const k_columns[] = {"time", "elastic", "kinetic", "rim_Fx", "rim_Fy", "rim_Fz",
                                         "rim_Tx", "rim_Ty", "rim_Tz", "umax"};
 
-int fem_output_open(struct fem_model *m, const char *dir, fem_output **out, cm_error *err)
+/* Creates (or, resuming, reopens) the files: keep_step < -1 creates them. */
+static int output_start(struct fem_model *m, const char *dir, long keep_step, long series_rows, fem_output **out,
+                        cm_error *err)
 {
     *out = NULL;
     char path[1024], csv[1024];
@@ -48,6 +50,12 @@ int fem_output_open(struct fem_model *m, const char *dir, fem_output **out, cm_e
     def.xdmf = CM_H5_XDMF_TETRAHEDRON;
     def.grid_name = "tire";
     def.geometry = "position"; /* deformed mesh in the world frame */
+    const int ncols = (int)(sizeof k_columns / sizeof *k_columns);
+    if (keep_step >= -1) {
+        if ((rc = cm_h5_reopen(path, &def, keep_step, &o->h5, err)) == CM_OK)
+            rc = cm_h5_series_reopen(o->h5, "/series", k_columns, ncols, csv, series_rows, &o->series, err);
+        goto done;
+    }
     if ((rc = cm_h5_create(path, &def, &o->h5, err)))
         goto done;
     for (size_t k = 0; k < 4 * ne; k++)
@@ -56,8 +64,7 @@ int fem_output_open(struct fem_model *m, const char *dir, fem_output **out, cm_e
         (rc = cm_h5_write_doubles(o->h5, "/mesh/points0", m->mesh.x, nn, 3, err)) ||
         (rc = cm_h5_attr_string(o->h5, "/", "units", "m, s, N, Pa; world frame (x travel, y axle, z up); /mesh/points0 undeformed, rim frame", err)))
         goto done;
-    rc = cm_h5_series_create(o->h5, "/series", k_columns, (int)(sizeof k_columns / sizeof *k_columns), csv,
-                             &o->series, err);
+    rc = cm_h5_series_create(o->h5, "/series", k_columns, ncols, csv, &o->series, err);
 done:
     free(conn);
     if (rc) {
@@ -67,6 +74,22 @@ done:
     }
     *out = o;
     return CM_OK;
+}
+
+int fem_output_open(struct fem_model *m, const char *dir, fem_output **out, cm_error *err)
+{
+    return output_start(m, dir, -2, 0, out, err);
+}
+
+int fem_output_reopen(struct fem_model *m, const char *dir, long keep_step, long series_rows, fem_output **out,
+                      cm_error *err)
+{
+    return output_start(m, dir, keep_step < -1 ? -1 : keep_step, series_rows, out, err);
+}
+
+long fem_output_rows(const fem_output *o)
+{
+    return o ? cm_h5_series_rows(o->series) : 0;
 }
 
 /* T_world = R T R^T for a symmetric tensor in XDMF Tensor6 order

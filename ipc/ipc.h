@@ -64,7 +64,13 @@ typedef enum ipc_state {
 /* Frame kinds. */
 enum { IPC_FRAME_DATA = 1, IPC_FRAME_FINISH = 2 };
 /* Frame flags. */
-enum { IPC_FLAG_STOP_REQUEST = 1u }; /* FEM -> DEM: please end the run (send FINISH) */
+enum {
+    IPC_FLAG_STOP_REQUEST = 1u, /* FEM -> DEM: please end the run (send FINISH) */
+    /* FEM -> DEM: both sides checkpoint the state after this exchange (the
+     * FEM has written or is writing its own); DEM -> FEM: the DEM side was
+     * interrupted (SIGINT/SIGTERM): please checkpoint this exchange and stop. */
+    IPC_FLAG_CHECKPOINT = 2u
+};
 
 /* Named scalars carried in every frame's info[] besides the payload. */
 enum {

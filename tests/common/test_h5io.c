@@ -656,6 +656,85 @@ static int durability_after_sigkill(void)
     return 0;
 }
 
+/* Resuming: a file with steps 0, 10, 20 and 5 series rows (+ CSV) reopened
+ * to continue after step 10 and row 3 keeps exactly those, lists them again
+ * in the XDMF, and continues with step 30 and a 4th row; typed arrays read
+ * back bit for bit and a wrong shape or type is refused. */
+static int reopen_cuts_back_and_continues(void)
+{
+    ENSURE(scratch());
+    char path[128], csv[128], xmf[128];
+    in_scratch(path, sizeof path, "run.h5");
+    in_scratch(csv, sizeof csv, "run.csv");
+    in_scratch(xmf, sizeof xmf, "run.xmf");
+    static const char *const cols[] = {"t", "x"};
+    cm_error err = {0};
+    cm_h5_def def = cm_h5_default_def();
+    def.xdmf = CM_H5_XDMF_POLYVERTEX;
+    cm_h5 *f = NULL;
+    cm_h5_series *se = NULL;
+    const double pos[6] = {0, 0, 0, 1, 1, 1}, vel[6] = {1, 2, 3, 4, 5, 6};
+    ENSURE(cm_h5_create(path, &def, &f, &err) == CM_OK);
+    ENSURE(cm_h5_series_create(f, "/series", cols, 2, csv, &se, &err) == CM_OK);
+    for (int k = 0; k < 3; k++) {
+        ENSURE(cm_h5_step_begin(f, 10L * k, 0.1 * k, &err) == CM_OK);
+        ENSURE(cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, 2, 3, &err) == CM_OK);
+        ENSURE(cm_h5_step_doubles(f, "velocity", CM_H5_NODE, vel, 2, 3, &err) == CM_OK);
+        ENSURE(cm_h5_step_end(f, &err) == CM_OK);
+    }
+    for (int r = 0; r < 5; r++) {
+        const double row[2] = {r, r * 1.5};
+        ENSURE(cm_h5_series_append(se, row, &err) == CM_OK);
+    }
+    ENSURE(cm_h5_close(&f, &err) == CM_OK);
+
+    ENSURE_MSG(cm_h5_reopen(path, &def, 10, &f, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_h5_series_reopen(f, "/series", cols, 2, csv, 3, &se, &err) == CM_OK, "%s", err.msg);
+    ENSURE(cm_h5_series_rows(se) == 3);
+    char *text = slurp(xmf);
+    ENSURE(text && strstr(text, "step_000010") && !strstr(text, "step_000020") &&
+           strstr(text, "Name=\"velocity\""));
+    free(text);
+    ENSURE(cm_h5_step_begin(f, 10, 0.5, &err) != CM_OK); /* must follow the last kept step */
+    ENSURE(cm_h5_step_begin(f, 30, 0.3, &err) == CM_OK);
+    ENSURE(cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, 2, 3, &err) == CM_OK);
+    ENSURE(cm_h5_step_end(f, &err) == CM_OK);
+    const double row[2] = {7, 8};
+    ENSURE(cm_h5_series_append(se, row, &err) == CM_OK);
+    /* raw arrays, as checkpoints use them */
+    const uint64_t keys[3] = {UINT64_MAX, 1ull << 63, 12345};
+    ENSURE(cm_h5_write_array(f, "/ck/keys", CM_H5_U64, keys, 3, 1, &err) == CM_OK);
+    ENSURE(cm_h5_close(&f, &err) == CM_OK);
+
+    const double want[8] = {0, 0, 1, 1.5, 2, 3, 7, 8};
+    ENSURE(check_csv(csv, "t,x", want, 4, 2) == 0);
+    ENSURE(cm_h5_open(path, 0, &f, &err) == CM_OK);
+    uint64_t back[3];
+    double wrong[3];
+    ENSURE(cm_h5_read_array(f, "/ck/keys", CM_H5_U64, back, 3, 1, &err) == CM_OK);
+    ENSURE(memcmp(back, keys, sizeof keys) == 0);
+    ENSURE(cm_h5_read_array(f, "/ck/keys", CM_H5_F64, wrong, 3, 1, &err) == CM_ERR_PARSE);
+    ENSURE(cm_h5_read_array(f, "/ck/keys", CM_H5_U64, back, 2, 1, &err) == CM_ERR_PARSE);
+    ENSURE(cm_h5_close(&f, &err) == CM_OK);
+    hid_t fid = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(fid >= 0);
+    ENSURE(H5Lexists(fid, "/steps/000010", H5P_DEFAULT) > 0 && H5Lexists(fid, "/steps/000030", H5P_DEFAULT) > 0);
+    ENSURE(H5Lexists(fid, "/steps/000020", H5P_DEFAULT) == 0);
+    hid_t d = H5Dopen2(fid, "/series", H5P_DEFAULT), sp = H5Dget_space(d);
+    hsize_t n = 0;
+    H5Sget_simple_extent_dims(sp, &n, NULL);
+    H5Sclose(sp);
+    H5Dclose(d);
+    H5Fclose(fid);
+    ENSURE(n == 4);
+    /* a CSV with fewer rows than the checkpoint expects is refused, naming it */
+    ENSURE(cm_h5_reopen(path, &def, 30, &f, &err) == CM_OK);
+    ENSURE(cm_h5_series_reopen(f, "/series", cols, 2, csv, 9, &se, &err) != CM_OK && strstr(err.msg, "run.h5"));
+    ENSURE(cm_h5_close(&f, &err) == CM_OK);
+    scratch_remove();
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static const test_case tests[] = {
@@ -664,6 +743,7 @@ int main(int argc, char **argv)
         {"unwritable_path_names_path", unwritable_path_names_path},
         {"xdmf_well_formed", xdmf_well_formed},
         {"durability_after_sigkill", durability_after_sigkill},
+        {"reopen_cuts_back_and_continues", reopen_cuts_back_and_continues},
     };
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL); /* the reading side's own failures are ENSUREd */
     return test_main(argc, argv, tests, TEST_COUNT(tests));

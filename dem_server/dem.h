@@ -279,7 +279,7 @@ void dem_time_limits(const dem_world *w, double *t_rayleigh, double *t_hertz);
 /* Dashpot factor gamma_n giving restitution e (model: enum dem_damping_model;
  * the calibrated one is fitted to the clamped contact, see dem_contact.c). */
 double dem_damping_for_restitution(double e, int model);
-/* FNV-1a hash of all grain positions and velocities (determinism tests). */
+/* FNV-1a hash of all grain positions, velocities, tags and frozen flags (determinism tests). */
 uint64_t dem_world_hash(const dem_world *w);
 const dem_world_def *dem_world_get_def(const dem_world *w);
 const dem_material *dem_world_material(const dem_world *w, int k);

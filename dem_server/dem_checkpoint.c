@@ -41,6 +41,7 @@ static void visit_window(cm_ckpt *ck, dem_window *win)
     dem_window_state st = *dem_window_get_state(win);
     cm_ckpt_double(ck, "/window/x_back", &st.x_back);
     cm_ckpt_double(ck, "/window/x_front", &st.x_front);
+    cm_ckpt_double(ck, "/window/x_cut", &st.x_cut);
     cm_ckpt_double(ck, "/window/next_offset", &st.next_offset);
     cm_ckpt_double(ck, "/window/x_freeze", &st.x_freeze);
     cm_ckpt_int(ck, "/window/wall_back", &st.wall_back);

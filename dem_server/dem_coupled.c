@@ -118,7 +118,9 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             xlo = fmin(xlo, c.x[3 * k]), xhi = fmax(xhi, c.x[3 * k]);
         double xc = 0.5 * (xlo + xhi);
         dem_window_check_footprint(def->window, w, &def->window_def, xc, def->window_def.expected_sinkage);
-        if (def->window && (rc = dem_window_update(def->window, w, xc, err)))
+        /* resuming, the checkpoint holds the window-changed world instead */
+        const int resuming = hooks && hooks->restore;
+        if (def->window && !resuming && (rc = dem_window_update(def->window, w, xc, err)))
             goto done;
     }
 

@@ -53,6 +53,16 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
                        "dem.window: the sample stretch [%g, %g) m (dem.window.sample_margin + dem.window.shift) does "
                        "not fit inside the bed [%g, %g) m away from its end walls; shorten dem.window.shift",
                        s0, s0 + len, xb, xf);
+    double r_max = 0.0;
+    for (int i = 0; i < g->n; i++)
+        r_max = fmax(r_max, g->r[i]);
+    /* A stretch thinner than a few grains is mostly seam: its copies pack
+     * loosely and the removals fire at every exchange. */
+    if (len < 4.0 * r_max)
+        return cm_fail(err, CM_ERR_RANGE,
+                       "dem.window.shift = %g m is shorter than two grain diameters (%g m): the appended stretches "
+                       "would be mostly seam; raise dem.window.shift",
+                       len, 4.0 * r_max);
     dem_window *win = calloc(1, sizeof *win);
     if (!win)
         return cm_fail(err, CM_ERR_NOMEM, "dem.window: out of memory");
@@ -88,7 +98,7 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
     win->def = *def;
     win->s0 = s0;
     win->len = len;
-    win->st.x_back = xb;
+    win->st.x_back = win->st.x_cut = xb;
     win->st.x_front = xf;
     win->st.wall_back = kb;
     win->st.wall_front = kf;
@@ -297,8 +307,9 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
     const dem_window_def *d = &win->def;
     dem_window_state *st = &win->st;
     int changed = 0;
-    if (wheel_x - d->behind - st->x_back >= d->shift) {
+    if (wheel_x - d->behind - st->x_cut >= d->shift) {
         double cut = wheel_x - d->behind;
+        st->x_cut = cut;
         int removed = 0;
         dem_grains_remove_below_x(w, cut, &removed);
         const dem_grains *g = &w->g;

@@ -36,6 +36,9 @@
  * dem_window_create). */
 typedef struct dem_window_state {
     double x_back, x_front;    /* m, planes of the back and front end walls */
+    double x_cut;              /* m, where grains were last removed behind (the next removal waits for the
+                                  wheel to advance `shift` past it; the back wall stands up to a grain
+                                  diameter behind it, so it cannot serve) */
     double next_offset;        /* m, x offset of the next appended copy of the sample stretch */
     double x_freeze;           /* m, wheel x at the last freezing update (NAN: none yet) */
     int wall_back, wall_front; /* indices of the end walls in the world */

@@ -1368,7 +1368,10 @@ uint64_t dem_world_hash(const dem_world *w)
     uint64_t h = 1469598103934665603ULL;
     for (int id = 0; id < g->n; id++) {
         int i = g->slot_of[id];
-        double v[9] = {g->x[i], g->y[i], g->z[i], g->vx[i], g->vy[i], g->vz[i], g->wx[i], g->wy[i], g->wz[i]};
+        /* the grain's tag and frozen flag too: a window-changed world must
+         * come back with the same names (they key the contact history) */
+        double v[11] = {g->x[i], g->y[i], g->z[i], g->vx[i], g->vy[i], g->vz[i], g->wx[i], g->wy[i], g->wz[i],
+                        (double)g->tag[i], (double)g->frozen[i]};
         const unsigned char *b = (const unsigned char *)v;
         for (size_t k = 0; k < sizeof v; k++) {
             h ^= b[k];

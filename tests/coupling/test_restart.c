@@ -217,13 +217,34 @@ typedef struct reference {
 /* A folder of its own with the scene and its settled bed (the bed is cached
  * beside the scene: every run then starts from the same loaded bed), and
  * the uninterrupted run. */
-static int setup(reference *ref)
+/* Replaces the first `from` in text (of capacity cap) by `to`. */
+static int replace_once(char *text, size_t cap, const char *from, const char *to)
+{
+    char *at = strstr(text, from);
+    ENSURE_MSG(at, "'%s' not in the test scene", from);
+    size_t tail = strlen(at + strlen(from));
+    ENSURE((size_t)(at - text) + strlen(to) + tail < cap);
+    memmove(at + strlen(to), at + strlen(from), tail + 1);
+    memcpy(at, to, strlen(to));
+    return 0;
+}
+
+/* window: the scene with a terrain window that removes grains behind the
+ * wheel, appends a stretch in front and freezes the far grains at the start
+ * (the wheel travels only millimetres in the test), so that the checkpoints
+ * hold a window-changed world and the frozen set keeps being updated. */
+static int setup_scene(reference *ref, int window)
 {
     snprintf(g_dir, sizeof g_dir, "/tmp/demfem-restart-%d", (int)getpid());
     snprintf(g_scene, sizeof g_scene, "%s/tire_ckpt.cfg", g_dir);
     mkdir(g_dir, 0755);
     static char text[1 << 14];
     ENSURE(file_text(DEMFEM_SOURCE_DIR "/tests/coupling/scenes/tire_ckpt.cfg", text, sizeof text) == 0);
+    if (window && (replace_once(text, sizeof text, "surface_material = \"tread\";",
+                                "surface_material = \"tread\";\n  window = { behind = 0.07; ahead = 0.16; shift = 0.03; "
+                                "sample_margin = 0.03; freeze_distance = 0.035; };") ||
+                   replace_once(text, sizeof text, "material = \"soil\";", "material = \"soil\"; side_walls = true;")))
+        return 1;
     FILE *f = fopen(g_scene, "w");
     ENSURE(f && fputs(text, f) >= 0 && fclose(f) == 0);
     char out[300], log[320];
@@ -247,6 +268,8 @@ static int setup(reference *ref)
     ENSURE(csv_rows(csv) == EXCHANGES);
     return 0;
 }
+
+static int setup(reference *ref) { return setup_scene(ref, 0); }
 
 static void cleanup(void)
 {
@@ -619,7 +642,36 @@ static int missing_mesh_file(void)
     return 0;
 }
 
+/* The terrain window's state (grains removed and appended, end walls moved,
+ * tags, frozen grains, the window's own counters) survives a checkpoint. */
+static int window_resume_bit_exact(void)
+{
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+    reference ref;
+    if (setup_scene(&ref, 1))
+        return 1;
+    static char text[1 << 16];
+    char log[320];
+    snprintf(log, sizeof log, "%s.dem.log", ref.out);
+    file_text(log, text, sizeof text);
+    ENSURE_MSG(strstr(text, "window: wheel at") && strstr(text, "appended") && strstr(text, "frozen"),
+               "the window did not act in the reference run (log %s)", log);
+    pair p;
+    char out[300];
+    snprintf(out, sizeof out, "%s/interrupted", g_dir);
+    ENSURE(pair_start(&p, out) == 0);
+    ENSURE(wait_rows(&p, 500, 60) == 0);
+    kill(p.fem, SIGTERM);
+    int fem_rc = wait_exit(p.fem, 20), dem_rc = wait_exit(p.dem, 20);
+    ENSURE_MSG(fem_rc == 128 + SIGTERM && dem_rc == 0, "interrupted run: fem exit %d, dem exit %d", fem_rc, dem_rc);
+    if (resume_matches(&ref, out))
+        return 1;
+    cleanup();
+    return 0;
+}
+
 static const test_case tests[] = {
+    {"window_resume_bit_exact", window_resume_bit_exact},
     {"full_disk_one_error_line", full_disk_one_error_line},
     {"output_folder_unwritable", output_folder_unwritable},
     {"missing_mesh_file", missing_mesh_file},

@@ -204,7 +204,7 @@ static double limit(double x, double lo, double hi, int *hit)
 
 /* omega and v for the next travel interval. The first one starts at zero
  * slip; then torque and drawbar control integrate their equation of motion
- * (symplectic Euler: the averaged soil force of the intervals done). */
+ * (explicit Euler on the averaged soil force of the intervals done). */
 static void travel_motion(const drive_def *d, drive_state *s, double dt, int entering)
 {
     int hit = 0;
@@ -256,7 +256,8 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, con
 
     /* 3. The motion for the next interval. Vertical: held height in
      * sink_travel's travel; with load_travel m z'' = F_contact - W(t) - c z',
-     * symplectic Euler with the damper implicit (stable for any c dt / m). */
+     * explicit Euler on the contact force of the interval just done, the
+     * damper implicit (stable for any c dt / m). */
     double vz = 0.0;
     if (d->motion == DRIVE_LOAD_TRAVEL) {
         double W = applied_load(d, time);

@@ -51,8 +51,9 @@ typedef enum drive_control { DRIVE_CONTROL_SLIP = 0, DRIVE_CONTROL_TORQUE = 1, D
 #define DRIVE_SLIP_LIMIT 0.95
 
 /* Vertical stiffness of the default bed under the wheel, measured: the free
- * 20 kg wheel of scenes/default.cfg heaves at about 22 Hz on it
- * (k = m (2 pi f)^2). The default rig damper is a fraction of critical on it. */
+ * 20 kg wheel of scenes/default.cfg heaves at about 22 Hz on it while it
+ * settles, before it turns (the load oscillates with a period of 45-48 ms),
+ * k = m (2 pi f)^2. The default rig damper is a fraction of critical on it. */
 #define DRIVE_SOIL_STIFFNESS_REF 3.8e5     /* N/m */
 #define DRIVE_DAMPING_RATIO_DEFAULT 0.3
 

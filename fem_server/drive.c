@@ -16,6 +16,7 @@ drive_def drive_def_default(void)
     d.omega = 1.8;
     d.travel_distance = 1.0;
     d.mass = 20.0;
+    d.damping_window = DRIVE_DAMPING_WINDOW_DEFAULT;
     d.inertia = 1.0;
     d.velocity = 0.5;
     d.control_window = 0.002;
@@ -83,7 +84,9 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
          (rc = cm_scene_double_opt(s, "wheel.settle_tolerance", 1e-4, 1.0, d->settle_tolerance,
                                    &d->settle_tolerance, err)) ||
          (rc = cm_scene_double_opt(s, "wheel.settle_speed", 1e-6, 10.0, d->settle_speed, &d->settle_speed, err)) ||
-         (rc = cm_scene_double_opt(s, "wheel.damping", 0.0, 1e7, -1.0, &d->damping, err))))
+         (rc = cm_scene_double_opt(s, "wheel.damping", 0.0, 1e7, -1.0, &d->damping, err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.damping_window", 0.0, 10.0, DRIVE_DAMPING_WINDOW_DEFAULT,
+                                   &d->damping_window, err))))
         return rc;
     return CM_OK;
 }
@@ -255,15 +258,21 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, con
         return rc;
 
     /* 3. The motion for the next interval. Vertical: held height in
-     * sink_travel's travel; with load_travel m z'' = F_contact - W(t) - c z',
-     * explicit Euler on the contact force of the interval just done, the
-     * damper implicit (stable for any c dt / m). */
+     * sink_travel's travel; with load_travel m z'' = F_contact - W(t) -
+     * c (z' - u), explicit Euler on the contact force of the interval just
+     * done, the damper implicit (stable for any c dt / m). u, the mean of z'
+     * over damping_window, makes it a heave damper: a sinkage at a steady
+     * rate under the load is not braked (a plain damper would carry c z' of
+     * the load while the wheel sinks, 20 % of it at the default scene's
+     * 5 cm/s at the start of the travel). */
     double vz = 0.0;
     if (d->motion == DRIVE_LOAD_TRAVEL) {
-        double W = applied_load(d, time);
-        vz = (s->velocity[2] + (soil->fz - W) / d->mass * dt) / (1.0 + d->damping * dt / d->mass);
+        double W = applied_load(d, time), cdm = d->damping * dt / d->mass;
+        vz = (s->velocity[2] + (soil->fz - W) / d->mass * dt + cdm * s->vz_avg) / (1.0 + cdm);
         if (s->phase == DRIVE_SINK && vz < -d->sink_velocity)
             vz = -d->sink_velocity; /* the rig lowers the wheel no faster than this */
+        if (d->damping_window > 0)
+            s->vz_avg += (d->damping_window > dt ? dt / d->damping_window : 1.0) * (vz - s->vz_avg);
     } else if (s->phase == DRIVE_SINK) {
         vz = -d->sink_velocity;
     }

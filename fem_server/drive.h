@@ -5,8 +5,10 @@
  * prescribed slip at that height (position control).
  * "load_travel" (second paper, sec. 3): the wheel's height is free; a vertical
  * load, ramped up from zero over load_ramp so that the wheel settles gently,
- * presses it into the bed (m z'' = F_contact - W - c z', c the rig's
- * damper, which takes the heave out of the free wheel), lowered no faster than
+ * presses it into the bed (m z'' = F_contact - W - c (z' - u), c the rig's
+ * damper, which takes the heave out of the free wheel; u the wheel's mean
+ * sinking speed, so that the damper does not carry load while the wheel
+ * sinks steadily), lowered no faster than
  * sink_velocity (a test rig sets the wheel down); once the contact force
  * carries the load, the wheel travels at the prescribed slip, still free to
  * sink or rise under the same load.
@@ -56,6 +58,9 @@ typedef enum drive_control { DRIVE_CONTROL_SLIP = 0, DRIVE_CONTROL_TORQUE = 1, D
  * k = m (2 pi f)^2. The default rig damper is a fraction of critical on it. */
 #define DRIVE_SOIL_STIFFNESS_REF 3.8e5     /* N/m */
 #define DRIVE_DAMPING_RATIO_DEFAULT 0.3
+/* s: the heave damper's window, about half a period of that heave: at 22 Hz
+ * the damper keeps 88 % of its effect (see drive_def.damping_window). */
+#define DRIVE_DAMPING_WINDOW_DEFAULT 0.02
 
 typedef struct drive_def {
     drive_motion motion;     /* "sink_travel" (default), "load_travel" or "fixed" */
@@ -87,8 +92,11 @@ typedef struct drive_def {
     double mass;             /* kg, mass of the wheel in its equations of motion
                                 (read from the scene: 0 = the tire mesh's, drive_resolve) */
     /* load_travel only: */
-    double damping;          /* N s/m, the rig's vertical damper: m z'' = F - W - c z'
+    double damping;          /* N s/m, the rig's vertical damper: m z'' = F - W - c (z' - u)
                                 (read from the scene: < 0 = default, drive_resolve) */
+    double damping_window;   /* s, u: the wheel's vertical velocity averaged over this
+                                window, so that the damper takes the heave and leaves
+                                a steady sinkage to the load (0: u = 0, a plain damper) */
     double load_ramp;        /* s, the load grows linearly from 0 to target_load over this time */
     double settle_tolerance; /* the travel starts when the averaged contact force is within
                                 this fraction of the load (after the ramp) ... */
@@ -126,6 +134,7 @@ typedef struct drive_state {
     double t_phase;     /* s, when the current phase began */
     double fx_avg;      /* N, moving average of the soil's F_x over control_window */
     double my_avg;      /* N m, moving average of the soil's M_y over control_window */
+    double vz_avg;      /* m/s, moving average of the vertical velocity over damping_window */
     long rate_limited;  /* exchanges at which max_accel or a stop limited the motion */
 } drive_state;
 

@@ -493,6 +493,7 @@ static int tire_torque_control(void)
     const char *p = strstr(log, "; inertia ");
     ENSURE(p && sscanf(p, "; inertia %lf kg m^2", &I) == 1 && I > 0.1 && I < 1.0); /* the mesh's */
     ENSURE(strstr(log, "realised, torque control") && strstr(log, "against the axle torque 3 N m"));
+    ENSURE(strstr(log, "limited the motion at 0 of")); /* else the balance below would not be exact */
     const char *cols[] = {"omega", "v", "slip", "My"};
     travel_rows tr;
     int n = read_travel(l.out, cols, 4, &tr);
@@ -529,6 +530,7 @@ static int tire_drawbar_control(void)
     ENSURE(l.status == 0);
     ENSURE(strstr(log_text(&l), "realised, drawbar control") &&
            strstr(log_text(&l), "against the drawbar load 5 N"));
+    ENSURE(strstr(log_text(&l), "limited the motion at 0 of")); /* else the balance below would not be exact */
     const char *cols[] = {"omega", "v", "slip", "Fx"};
     travel_rows tr;
     int n = read_travel(l.out, cols, 4, &tr);

@@ -366,11 +366,12 @@ static int damper_decays_heave(void)
     const double wn = sqrt(k / m), zeta = DRIVE_DAMPING_RATIO_DEFAULT;
     const double wd = wn * sqrt(1 - zeta * zeta), period = 2 * M_PI / wd, zs = W / k;
     ENSURE_NEAR(drive_default_damping(m), zeta * 2 * sqrt(k * m), 1e-9);
-    for (int damped = 1; damped >= 0; damped--) {
+    for (int damped = 2; damped >= 0; damped--) { /* 2: heave damper, 1: plain, 0: none */
         drive_def d = control_def(DRIVE_CONTROL_SLIP);
         d.motion = DRIVE_LOAD_TRAVEL;
         d.mass = m;
         d.damping = damped ? drive_default_damping(m) : 0.0;
+        d.damping_window = damped == 2 ? DRIVE_DAMPING_WINDOW_DEFAULT : 0.0; /* 1: the textbook oscillator */
         d.target_load = W;
         d.load_ramp = 0.0;
         d.sink_velocity = 10.0; /* the rig's lowering speed limit out of the way */
@@ -384,7 +385,7 @@ static int damper_decays_heave(void)
         for (int i = 0; i < n; i++) {
             double z = s.center[2], t = i * dt;
             const drive_soil soil = {0.0, z < 0 ? -k * z : 0.0, 0.0};
-            if (damped) {
+            if (damped == 1) {
                 double zx = -zs * (1 - exp(-zeta * wn * t) * (cos(wd * t) + zeta / sqrt(1 - zeta * zeta) * sin(wd * t)));
                 max_err = fmax(max_err, fabs(z - zx));
             }
@@ -392,15 +393,57 @@ static int damper_decays_heave(void)
                 late_amp = fmax(late_amp, fabs(z + zs));
             ENSURE(drive_update(&d, &s, t + dt, dt, &soil, &err) == CM_OK);
         }
-        if (damped)
-            printf("  damped (zeta 0.3): largest deviation from the closed form %.3g of W/k\n", max_err / zs);
-        printf("  %s: heave after 7 periods %.3g of W/k\n", damped ? "damped" : "undamped", late_amp / zs);
-        if (damped) {
+        static const char *const names[] = {"undamped", "plain damper", "heave damper"};
+        if (damped == 1)
+            printf("  plain damper (zeta 0.3): largest deviation from the closed form %.3g of W/k\n", max_err / zs);
+        printf("  %s: heave after 7 periods %.3g of W/k\n", names[damped], late_amp / zs);
+        if (damped == 2) {
+            ENSURE(late_amp < 1e-4 * zs);
+            ENSURE(s.phase == DRIVE_TRAVEL);
+        } else if (damped) {
             ENSURE(max_err < 0.01 * zs);
             ENSURE(late_amp < 1e-3 * zs); /* 0.14^7 = 1e-6 of the first overshoot */
             ENSURE(s.phase == DRIVE_TRAVEL); /* settled: it travels */
         } else {
             ENSURE(late_amp > 0.9 * zs); /* still heaving by the full static sinkage */
+        }
+    }
+    return 0;
+}
+
+/* A wheel sinking at v0 into a soil that carries exactly the load (a
+ * plastic soil, F = W): a plain damper brakes it to rest (time constant
+ * m / c); the heave damper acts on z' - u, u the mean of z' over the window
+ * tau, so m z' + c tau u is conserved and the wheel goes on sinking at
+ * m v0 / (m + c tau) with the damper carrying nothing. */
+static int damper_spares_steady_sinkage(void)
+{
+    const double m = 20.0, W = 1000.0, v0 = 0.05, c = drive_default_damping(m);
+    for (int windowed = 0; windowed < 2; windowed++) {
+        drive_def d = control_def(DRIVE_CONTROL_SLIP);
+        d.motion = DRIVE_LOAD_TRAVEL;
+        d.mass = m;
+        d.damping = c;
+        d.damping_window = windowed ? DRIVE_DAMPING_WINDOW_DEFAULT : 0.0;
+        d.target_load = W;
+        d.load_ramp = 0.0;
+        d.sink_velocity = 10.0;
+        d.max_sink = 100.0;
+        drive_state s;
+        drive_start(&d, &s);
+        s.velocity[2] = -v0;
+        cm_error err = {0};
+        const double dt = 1e-5;
+        const drive_soil soil = {0.0, W, 0.0};
+        for (int i = 0; i < 20000; i++) /* 0.2 s: 12 m / c, 10 windows */
+            ENSURE(drive_update(&d, &s, (i + 1) * dt, dt, &soil, &err) == CM_OK);
+        double vz = -s.velocity[2], expect = windowed ? m * v0 / (m + c * d.damping_window) : 0.0;
+        printf("  %s damper: sinks at %.5f m/s after 0.2 s (closed form %.5f), damper force %.3f N\n",
+               windowed ? "heave" : "plain", vz, expect, c * (s.vz_avg - s.velocity[2]));
+        ENSURE_NEAR(vz, expect, 0.01 * v0);
+        if (windowed) {
+            ENSURE(s.phase == DRIVE_SINK); /* still sinking: no travel */
+            ENSURE(fabs(c * (s.velocity[2] - s.vz_avg)) < 1e-3 * W);
         }
     }
     return 0;
@@ -468,6 +511,7 @@ static const test_case tests[] = {
     {"drawbar_control", drawbar_control},
     {"slip_control_realises_slip", slip_control_realises_slip},
     {"damper_decays_heave", damper_decays_heave},
+    {"damper_spares_steady_sinkage", damper_spares_steady_sinkage},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

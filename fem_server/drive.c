@@ -16,6 +16,11 @@ drive_def drive_def_default(void)
     d.omega = 1.8;
     d.travel_distance = 1.0;
     d.mass = 20.0;
+    d.damping_window = DRIVE_DAMPING_WINDOW_DEFAULT;
+    d.inertia = 1.0;
+    d.velocity = 0.5;
+    d.control_window = 0.002;
+    d.max_accel = 5.0;
     d.load_ramp = 0.1;
     d.settle_tolerance = 0.05;
     d.settle_speed = 0.01;
@@ -25,7 +30,8 @@ drive_def drive_def_default(void)
 int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
 {
     static const char *const motions[] = {"sink_travel", "fixed", "load_travel", NULL};
-    int motion = (int)d->motion, rc;
+    static const char *const controls[] = {"slip", "torque", "drawbar", NULL};
+    int motion = (int)d->motion, control = (int)d->control, rc;
     if ((rc = cm_scene_choice_opt(s, "wheel.motion", motions, motion, &motion, err)))
         return rc;
     d->motion = (drive_motion)motion;
@@ -36,6 +42,9 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
             return rc;
         return CM_OK;
     }
+    if ((rc = cm_scene_choice_opt(s, "wheel.control", controls, control, &control, err)))
+        return rc;
+    d->control = (drive_control)control;
     if ((rc = cm_scene_doubles(s, "wheel.center", 3, -1e3, 1e3, d->center, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.start_gap", 0.0, 1.0, d->start_gap, &d->start_gap, err)) ||
         (rc = cm_scene_double(s, "wheel.radius", 1e-3, 10.0, &d->radius, err)) ||
@@ -43,19 +52,62 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
         (rc = cm_scene_double(s, "wheel.target_load", 0.0, 1e7, &d->target_load, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.load_window", 0.0, 10.0, d->load_window, &d->load_window, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.max_sink", 1e-4, 10.0, d->max_sink, &d->max_sink, err)) ||
-        (rc = cm_scene_double_opt(s, "wheel.slip", -0.95, 0.95, d->slip, &d->slip, err)) ||
-        (rc = cm_scene_double_opt(s, "wheel.omega", 1e-6, 1e3, d->omega, &d->omega, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.travel_distance", 0.0, 1e3, d->travel_distance, &d->travel_distance,
                                   err)))
         return rc;
+    /* What the control prescribes; the keys of the other controls are
+     * refused as unused (a scene that sets both slip and torque is wrong). */
+    if (d->control == DRIVE_CONTROL_SLIP &&
+        (rc = cm_scene_double_opt(s, "wheel.slip", -DRIVE_SLIP_LIMIT, DRIVE_SLIP_LIMIT, d->slip, &d->slip, err)))
+        return rc;
+    if (d->control != DRIVE_CONTROL_TORQUE &&
+        (rc = cm_scene_double_opt(s, "wheel.omega", 1e-6, 1e3, d->omega, &d->omega, err)))
+        return rc;
+    if (d->control == DRIVE_CONTROL_TORQUE &&
+        ((rc = cm_scene_double(s, "wheel.velocity", 1e-6, 100.0, &d->velocity, err)) ||
+         (rc = cm_scene_double(s, "wheel.torque", -1e6, 1e6, &d->torque, err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.inertia", 1e-6, 1e4, 0.0, &d->inertia, err))))
+        return rc;
+    if (d->control == DRIVE_CONTROL_DRAWBAR &&
+        (rc = cm_scene_double(s, "wheel.drawbar", -1e7, 1e7, &d->drawbar, err)))
+        return rc;
+    if (d->control != DRIVE_CONTROL_SLIP &&
+        ((rc = cm_scene_double_opt(s, "wheel.control_window", 0.0, 10.0, d->control_window, &d->control_window,
+                                   err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.max_accel", 1e-6, 1e4, d->max_accel, &d->max_accel, err))))
+        return rc;
+    if ((d->motion == DRIVE_LOAD_TRAVEL || d->control == DRIVE_CONTROL_DRAWBAR) &&
+        (rc = cm_scene_double_opt(s, "wheel.mass", 1e-3, 1e5, 0.0, &d->mass, err)))
+        return rc;
     if (d->motion == DRIVE_LOAD_TRAVEL &&
-        ((rc = cm_scene_double_opt(s, "wheel.mass", 1e-3, 1e5, d->mass, &d->mass, err)) ||
-         (rc = cm_scene_double_opt(s, "wheel.load_ramp", 0.0, 100.0, d->load_ramp, &d->load_ramp, err)) ||
+        ((rc = cm_scene_double_opt(s, "wheel.load_ramp", 0.0, 100.0, d->load_ramp, &d->load_ramp, err)) ||
          (rc = cm_scene_double_opt(s, "wheel.settle_tolerance", 1e-4, 1.0, d->settle_tolerance,
                                    &d->settle_tolerance, err)) ||
-         (rc = cm_scene_double_opt(s, "wheel.settle_speed", 1e-6, 10.0, d->settle_speed, &d->settle_speed, err))))
+         (rc = cm_scene_double_opt(s, "wheel.settle_speed", 1e-6, 10.0, d->settle_speed, &d->settle_speed, err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.damping", 0.0, 1e7, -1.0, &d->damping, err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.damping_window", 0.0, 10.0, DRIVE_DAMPING_WINDOW_DEFAULT,
+                                   &d->damping_window, err))))
         return rc;
     return CM_OK;
+}
+
+double drive_default_damping(double mass)
+{
+    /* c = zeta 2 sqrt(k m): zeta = 0.3 of critical takes a heave down to
+     * exp(-2 pi zeta / sqrt(1 - zeta^2)) = 14 % in one period, as a test
+     * rig's damper, without holding up the slow sinkage (at 10 mm/s the
+     * 20 kg wheel's damper carries 17 N of a 400 N load). */
+    return DRIVE_DAMPING_RATIO_DEFAULT * 2.0 * sqrt(DRIVE_SOIL_STIFFNESS_REF * mass);
+}
+
+void drive_resolve(drive_def *d, double mesh_mass, double mesh_inertia)
+{
+    if (!(d->mass > 0) && mesh_mass > 0)
+        d->mass = mesh_mass;
+    if (!(d->inertia > 0) && mesh_inertia > 0)
+        d->inertia = mesh_inertia;
+    if (d->damping < 0)
+        d->damping = drive_default_damping(d->mass);
 }
 
 void drive_start(const drive_def *d, drive_state *s)
@@ -79,6 +131,11 @@ double drive_slip(double omega, double radius, double v)
     return v > 0 ? (wr - v) / v : 0.0;
 }
 
+double drive_realised_slip(const drive_def *d, const drive_state *s)
+{
+    return s->phase == DRIVE_TRAVEL ? drive_slip(s->omega, d->radius, s->velocity[0]) : 0.0;
+}
+
 /* The applied vertical load at time t: ramped up from zero, so that the
  * wheel is set down gently (no impact disturbing the settled bed). */
 static double applied_load(const drive_def *d, double time)
@@ -88,9 +145,10 @@ static double applied_load(const drive_def *d, double time)
 }
 
 /* Moves the state by the motion held during the interval just computed,
- * and folds the interval's load into its moving average (over about
- * load_window, so that one grain's spike does not end a phase early). */
-static void advance_interval(const drive_def *d, drive_state *s, double dt, double load)
+ * and folds the interval's soil force into its moving averages (over about
+ * load_window and control_window, so that one grain's spike neither ends a
+ * phase early nor kicks the wheel). */
+static void advance_interval(const drive_def *d, drive_state *s, double dt, const drive_soil *soil)
 {
     for (int k = 0; k < 3; k++)
         s->center[k] += s->velocity[k] * dt;
@@ -100,17 +158,17 @@ static void advance_interval(const drive_def *d, drive_state *s, double dt, doub
     else if (s->phase == DRIVE_TRAVEL)
         s->travelled += s->velocity[0] * dt;
     double blend = d->load_window > dt ? dt / d->load_window : 1.0;
-    s->load_avg += blend * (load - s->load_avg);
+    s->load_avg += blend * (soil->fz - s->load_avg);
+    blend = d->control_window > dt ? dt / d->control_window : 1.0;
+    s->fx_avg += blend * (soil->fx - s->fx_avg);
+    s->my_avg += blend * (soil->my - s->my_avg);
 }
 
-/* load_travel: m z'' = F_contact - W(t), integrated with symplectic Euler
- * over each interval (the contact force is that of the interval just done). */
-static int drive_update_load(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
+/* Phase changes from the averaged load; fails after max_sink. */
+static int change_phase(const drive_def *d, drive_state *s, double time, cm_error *err)
 {
-    advance_interval(d, s, dt, load);
-    double W = applied_load(d, time);
-
-    if (s->phase == DRIVE_SINK) {
+    if (s->phase == DRIVE_SINK && d->motion == DRIVE_LOAD_TRAVEL) {
+        double W = applied_load(d, time);
         if (time >= d->load_ramp && fabs(s->load_avg - W) <= d->settle_tolerance * W &&
             fabs(s->velocity[2]) < d->settle_speed) {
             s->phase = DRIVE_TRAVEL;
@@ -121,53 +179,112 @@ static int drive_update_load(const drive_def *d, drive_state *s, double time, do
                            "force carrying it (averaged %g N)",
                            s->sunk, d->target_load, s->load_avg);
         }
+    } else if (s->phase == DRIVE_SINK) {
+        if (s->load_avg >= d->target_load) {
+            s->phase = DRIVE_TRAVEL;
+            s->t_phase = time;
+        } else if (s->sunk > d->max_sink) {
+            return cm_fail(err, CM_ERR_NUMERIC,
+                           "wheel sank %.3f m (wheel.max_sink) without reaching wheel.target_load = %g N (load %g N)",
+                           s->sunk, d->target_load, s->load_avg);
+        }
     } else if (s->phase == DRIVE_TRAVEL && s->travelled >= d->travel_distance) {
         s->phase = DRIVE_DONE;
         s->t_phase = time;
-    }
-    double vz = s->velocity[2] + (load - W) / d->mass * dt;
-    if (s->phase == DRIVE_SINK && vz < -d->sink_velocity)
-        vz = -d->sink_velocity; /* the rig lowers the wheel no faster than this */
-    memset(s->velocity, 0, sizeof s->velocity);
-    s->omega = 0.0;
-    if (s->phase == DRIVE_DONE)
-        return CM_OK;
-    s->velocity[2] = vz;
-    if (s->phase == DRIVE_TRAVEL) {
-        s->omega = d->omega;
-        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, d->slip);
     }
     return CM_OK;
 }
 
-int drive_update(const drive_def *d, drive_state *s, double time, double dt, double load, cm_error *err)
+/* x limited to [lo, hi]; counts the exchanges at which a limit acted. */
+static double limit(double x, double lo, double hi, int *hit)
+{
+    if (x < lo || x > hi) {
+        *hit = 1;
+        return x < lo ? lo : hi;
+    }
+    return x;
+}
+
+/* omega and v for the next travel interval. The first one starts at zero
+ * slip; then torque and drawbar control integrate their equation of motion
+ * (explicit Euler on the averaged soil force of the intervals done). */
+static void travel_motion(const drive_def *d, drive_state *s, double dt, int entering)
+{
+    int hit = 0;
+    switch (d->control) {
+    case DRIVE_CONTROL_SLIP:
+        s->omega = d->omega;
+        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, d->slip);
+        return;
+    case DRIVE_CONTROL_TORQUE: {
+        s->velocity[0] = d->velocity;
+        if (entering) {
+            s->omega = d->velocity / d->radius;
+            return;
+        }
+        /* I omega' = T + M_y; the stops: a braked wheel locks (omega = 0,
+         * slip -1) and the driven one spins at most to slip DRIVE_SLIP_LIMIT. */
+        double a_max = d->max_accel / d->radius;
+        double a = limit((d->torque + s->my_avg) / d->inertia, -a_max, a_max, &hit);
+        s->omega = limit(s->omega + a * dt, 0.0, d->velocity / (d->radius * (1.0 - DRIVE_SLIP_LIMIT)), &hit);
+        break;
+    }
+    case DRIVE_CONTROL_DRAWBAR: {
+        s->omega = d->omega;
+        if (entering) {
+            s->velocity[0] = d->omega * d->radius;
+            return;
+        }
+        /* m v' = F_x - D; the stops: a stuck wheel stands (v = 0, slip 1)
+         * and a pushed one skids at most to slip -DRIVE_SLIP_LIMIT. */
+        double a = limit((s->fx_avg - d->drawbar) / d->mass, -d->max_accel, d->max_accel, &hit);
+        s->velocity[0] = limit(s->velocity[0] + a * dt, 0.0, d->omega * d->radius / (1.0 - DRIVE_SLIP_LIMIT), &hit);
+        break;
+    }
+    }
+    s->rate_limited += hit;
+}
+
+int drive_update(const drive_def *d, drive_state *s, double time, double dt, const drive_soil *soil,
+                 cm_error *err)
 {
     if (s->phase == DRIVE_FIXED)
         return CM_OK;
-    if (d->motion == DRIVE_LOAD_TRAVEL)
-        return drive_update_load(d, s, time, dt, load, err);
     /* 1. Move; 2. phase changes from the averaged load. */
-    advance_interval(d, s, dt, load);
-    if (s->phase == DRIVE_SINK && s->load_avg >= d->target_load) {
-        s->phase = DRIVE_TRAVEL;
-        s->t_phase = time;
-    } else if (s->phase == DRIVE_SINK && s->sunk > d->max_sink) {
-        return cm_fail(err, CM_ERR_NUMERIC,
-                       "wheel sank %.3f m (wheel.max_sink) without reaching wheel.target_load = %g N (load %g N)",
-                       s->sunk, d->target_load, s->load_avg);
-    } else if (s->phase == DRIVE_TRAVEL && s->travelled >= d->travel_distance) {
-        s->phase = DRIVE_DONE;
-        s->t_phase = time;
-    }
+    advance_interval(d, s, dt, soil);
+    drive_phase before = s->phase;
+    int rc = change_phase(d, s, time, err);
+    if (rc)
+        return rc;
 
-    /* 3. The motion for the next interval. */
-    memset(s->velocity, 0, sizeof s->velocity);
-    s->omega = 0.0;
-    if (s->phase == DRIVE_SINK) {
-        s->velocity[2] = -d->sink_velocity;
-    } else if (s->phase == DRIVE_TRAVEL) {
-        s->omega = d->omega;
-        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, d->slip);
+    /* 3. The motion for the next interval. Vertical: held height in
+     * sink_travel's travel; with load_travel m z'' = F_contact - W(t) -
+     * c (z' - u), explicit Euler on the contact force of the interval just
+     * done, the damper implicit (stable for any c dt / m). u, the mean of z'
+     * over damping_window, makes it a heave damper: a sinkage at a steady
+     * rate under the load is not braked (a plain damper would carry c z' of
+     * the load while the wheel sinks, 20 % of it at the default scene's
+     * 5 cm/s at the start of the travel). */
+    double vz = 0.0;
+    if (d->motion == DRIVE_LOAD_TRAVEL) {
+        double W = applied_load(d, time), cdm = d->damping * dt / d->mass;
+        vz = (s->velocity[2] + (soil->fz - W) / d->mass * dt + cdm * s->vz_avg) / (1.0 + cdm);
+        if (s->phase == DRIVE_SINK && vz < -d->sink_velocity)
+            vz = -d->sink_velocity; /* the rig lowers the wheel no faster than this */
+        if (d->damping_window > 0)
+            s->vz_avg += (d->damping_window > dt ? dt / d->damping_window : 1.0) * (vz - s->vz_avg);
+    } else if (s->phase == DRIVE_SINK) {
+        vz = -d->sink_velocity;
+    }
+    if (s->phase == DRIVE_TRAVEL) {
+        s->velocity[1] = 0.0;
+        s->velocity[2] = vz;
+        travel_motion(d, s, dt, before != DRIVE_TRAVEL);
+    } else {
+        memset(s->velocity, 0, sizeof s->velocity);
+        s->omega = 0.0;
+        if (s->phase == DRIVE_SINK)
+            s->velocity[2] = vz;
     }
     return CM_OK;
 }

@@ -172,6 +172,10 @@ void fem_get_energy(const fem_model *m, fem_energy *e);
  * The load on the axle is its negative. */
 void fem_rim_reaction(const fem_model *m, double force[3], double torque[3]);
 
+/* Mass [kg] of the tire mesh (sum of the lumped masses of eq. 33) and its
+ * moment of inertia [kg m^2] about the axle (the rim frame's y axis). */
+void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle);
+
 /* Mesh sizes, and the node displacements in the rim frame (3 per node). */
 void fem_mesh_size(const fem_model *m, int *n_nodes, int *n_tets);
 const double *fem_displacement(const fem_model *m);

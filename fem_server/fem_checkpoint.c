@@ -23,6 +23,10 @@ void fem_checkpoint_drive(cm_ckpt *ck, drive_state *s)
     cm_ckpt_double(ck, "/drive/load_avg", &s->load_avg);
     cm_ckpt_double(ck, "/drive/travelled", &s->travelled);
     cm_ckpt_double(ck, "/drive/t_phase", &s->t_phase);
+    cm_ckpt_double(ck, "/drive/fx_avg", &s->fx_avg);
+    cm_ckpt_double(ck, "/drive/my_avg", &s->my_avg);
+    cm_ckpt_double(ck, "/drive/vz_avg", &s->vz_avg);
+    cm_ckpt_long(ck, "/drive/rate_limited", &s->rate_limited);
 }
 
 static void visit_model(cm_ckpt *ck, fem_model *m)
@@ -59,12 +63,15 @@ static void visit_run(cm_ckpt *ck, fem_ckpt_run *r)
     cm_ckpt_count(ck, "/run/travel_n", &tn, 1 << 30);
     if (!ck->writing && ck->rc == CM_OK) {
         r->travel_n = (size_t)tn;
-        for (int k = 0; k < 4; k++)
+        for (int k = 0; k < FEM_CKPT_TRAVEL_COLS; k++)
             if (!(r->travel[k] = malloc((tn ? (size_t)tn : 1) * sizeof(double))))
                 ck->rc = cm_fail(ck->err, CM_ERR_NOMEM, "%s: out of memory for the travel series", ck->path);
     }
-    static const char *const names[4] = {"/run/travel_TH", "/run/travel_TR", "/run/travel_TP", "/run/travel_sinkage"};
-    for (int k = 0; k < 4; k++)
+    static const char *const names[FEM_CKPT_TRAVEL_COLS] = {"/run/travel_TH",      "/run/travel_TR",
+                                                            "/run/travel_TP",      "/run/travel_sinkage",
+                                                            "/run/travel_slip",    "/run/travel_Fx",
+                                                            "/run/travel_My"};
+    for (int k = 0; k < FEM_CKPT_TRAVEL_COLS; k++)
         cm_ckpt_f64(ck, names[k], r->travel[k], r->travel_n);
 }
 

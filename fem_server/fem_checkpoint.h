@@ -12,6 +12,10 @@
 #include "drive.h"
 #include "fem.h"
 
+/* Columns of the travel series kept for the summary, in this order:
+ * T_H, T_R, T_P, sinkage, realised slip, soil F_x, soil M_y. */
+#define FEM_CKPT_TRAVEL_COLS 7
+
 /* The exchange loop's state besides the model's. */
 typedef struct fem_ckpt_run {
     long exchange;                 /* exchanges completed (the last one's number) */
@@ -20,8 +24,8 @@ typedef struct fem_ckpt_run {
     double max_force_mismatch, max_moment_mismatch;
     uint32_t n_nodes;
     double *x_prev;                /* 3 n_nodes: the interface positions last sent */
-    size_t travel_n;               /* the travel series for the summary (T_H, T_R, T_P, sinkage) */
-    double *travel[4];             /* reading: allocated here (malloc), owned by the caller */
+    size_t travel_n;               /* the travel series for the summary, FEM_CKPT_TRAVEL_COLS columns */
+    double *travel[FEM_CKPT_TRAVEL_COLS]; /* reading: allocated here (malloc), owned by the caller */
     long series_rows;              /* rows of wheel.h5:/series and traction.csv */
 } fem_ckpt_run;
 

@@ -62,44 +62,36 @@ static const char *const k_columns[NCOL] = {
     "t", "phase", "x", "z", "angle", "omega", "v", "slip", "Fx", "Fy", "Fz", "My",
     "T_H", "T_R", "T_P", "contacts", "sinkage", "E_elastic", "E_kinetic", "W_dem", "W_fem"};
 
+/* The travel phase's series for the summary (grown by doubling). */
+enum { SER_TH, SER_TR, SER_TP, SER_SINK, SER_SLIP, SER_FX, SER_MY, SER_N };
+_Static_assert(SER_N == FEM_CKPT_TRAVEL_COLS, "the checkpoint keeps every column of the travel series");
 typedef struct series_buf {
-    double *th, *tr, *tp, *sink;
+    double *col[SER_N];
     size_t n, cap;
 } series_buf;
 
-static int series_push(series_buf *b, double th, double tr, double tp, double sink)
+static int series_push(series_buf *b, const double row[SER_N])
 {
     if (b->n == b->cap) {
         size_t cap = b->cap ? 2 * b->cap : 4096;
-        double *p[4] = {realloc(b->th, cap * sizeof(double)), NULL, NULL, NULL};
-        if (!p[0])
-            return -1;
-        b->th = p[0];
-        if (!(p[1] = realloc(b->tr, cap * sizeof(double))))
-            return -1;
-        b->tr = p[1];
-        if (!(p[2] = realloc(b->tp, cap * sizeof(double))))
-            return -1;
-        b->tp = p[2];
-        if (!(p[3] = realloc(b->sink, cap * sizeof(double))))
-            return -1;
-        b->sink = p[3];
+        for (int k = 0; k < SER_N; k++) {
+            double *p = realloc(b->col[k], cap * sizeof(double));
+            if (!p)
+                return -1;
+            b->col[k] = p;
+        }
         b->cap = cap;
     }
-    b->th[b->n] = th;
-    b->tr[b->n] = tr;
-    b->tp[b->n] = tp;
-    b->sink[b->n] = sink;
+    for (int k = 0; k < SER_N; k++)
+        b->col[k][b->n] = row[k];
     b->n++;
     return 0;
 }
 
 static void series_free(series_buf *b)
 {
-    free(b->th);
-    free(b->tr);
-    free(b->tp);
-    free(b->sink);
+    for (int k = 0; k < SER_N; k++)
+        free(b->col[k]);
 }
 
 static void rotation_about_y(double angle, double R[9])
@@ -126,6 +118,51 @@ static void print_summary_line(const char *name, const double *x, size_t n, size
     steady_summary(x, n, start, &st);
     cm_log_info("  %-4s mean %9.2f N  (95%% CI +-%7.2f N, %d batches)  min %9.2f  max %9.2f", name, st.mean,
                 st.half_width, st.batches, st.min, st.max);
+}
+
+static const char *const k_control_names[] = {"slip", "torque", "drawbar"};
+
+/* The traction summary over the steady part of the travel. Under torque or
+ * drawbar control the slip is the outcome and settles too: the steady part
+ * starts where both the drawbar pull and the slip are steady. */
+static void print_traction_summary(const drive_def *d, const series_buf *tr, double interval)
+{
+    size_t start = steady_start(tr->col[SER_TP], tr->n);
+    if (d->control != DRIVE_CONTROL_SLIP) {
+        size_t s_slip = steady_start(tr->col[SER_SLIP], tr->n);
+        start = s_slip > start ? s_slip : start;
+    }
+    char what[160];
+    if (d->control == DRIVE_CONTROL_SLIP)
+        snprintf(what, sizeof what, "slip %.1f %%", 100 * d->slip);
+    else if (d->control == DRIVE_CONTROL_TORQUE)
+        snprintf(what, sizeof what, "axle torque %g N m at v = %g m/s", d->torque, d->velocity);
+    else
+        snprintf(what, sizeof what, "drawbar load %g N at omega = %g rad/s", d->drawbar, d->omega);
+    cm_log_info("traction over the steady part of the travel: from exchange %zu of %zu (t = %.3f s after "
+                "travel began), %s",
+                start, tr->n, (double)start * interval, what);
+    print_summary_line("T_H", tr->col[SER_TH], tr->n, start);
+    print_summary_line("T_R", tr->col[SER_TR], tr->n, start);
+    print_summary_line("T_P", tr->col[SER_TP], tr->n, start);
+    steady_stats st;
+    steady_summary(tr->col[SER_SINK], tr->n, start, &st);
+    cm_log_info("  sinkage mean %.1f mm (95%% CI +-%.1f mm)", 1e3 * st.mean, 1e3 * st.half_width);
+    if (d->control == DRIVE_CONTROL_SLIP)
+        return;
+    steady_summary(tr->col[SER_SLIP], tr->n, start, &st);
+    cm_log_info("  slip mean %.2f %% (95%% CI +-%.2f %%)  min %.2f %%  max %.2f %% (realised, %s control)",
+                100 * st.mean, 100 * st.half_width, 100 * st.min, 100 * st.max, k_control_names[d->control]);
+    /* The equation of motion's balance: the soil carries what is prescribed. */
+    if (d->control == DRIVE_CONTROL_TORQUE) {
+        steady_summary(tr->col[SER_MY], tr->n, start, &st);
+        cm_log_info("  soil moment about the axle mean %.3f N m (95%% CI +-%.3f N m) against the axle torque %g N m",
+                    st.mean, st.half_width, d->torque);
+    } else {
+        steady_summary(tr->col[SER_FX], tr->n, start, &st);
+        cm_log_info("  soil force along the travel mean %.2f N (95%% CI +-%.2f N) against the drawbar load %g N",
+                    st.mean, st.half_width, d->drawbar);
+    }
 }
 
 static int run(const options *o)
@@ -184,6 +221,23 @@ static int run(const options *o)
                 "(estimate h/c %.3g s)",
                 n_mesh_nodes, n_tets, cm_now() - t0, stab.dt_limit, stab.dt_estimate);
 
+    double mesh_mass, mesh_inertia;
+    fem_mass_properties(model, &mesh_mass, &mesh_inertia);
+    drive_resolve(&drive, mesh_mass, mesh_inertia);
+    if (drive.motion != DRIVE_HOLD) {
+        char used[160] = "";
+        if (drive.motion == DRIVE_LOAD_TRAVEL || drive.control == DRIVE_CONTROL_DRAWBAR)
+            snprintf(used, sizeof used, "; mass %.3g kg", drive.mass);
+        if (drive.control == DRIVE_CONTROL_TORQUE)
+            snprintf(used + strlen(used), sizeof used - strlen(used), "; inertia %.3g kg m^2", drive.inertia);
+        cm_log_info("wheel: %s, %s control%s (tire mesh: %.3g kg, %.3g kg m^2 about the axle)",
+                    drive.motion == DRIVE_LOAD_TRAVEL ? "load_travel" : "sink_travel",
+                    k_control_names[drive.control], used, mesh_mass, mesh_inertia);
+    }
+    if (drive.motion == DRIVE_LOAD_TRAVEL)
+        cm_log_info("wheel: vertical damper %.4g N s/m (%.2f of critical on the reference soil stiffness %.3g N/m)",
+                    drive.damping, drive.damping / (2.0 * sqrt(DRIVE_SOIL_STIFFNESS_REF * drive.mass)),
+                    DRIVE_SOIL_STIFFNESS_REF);
     drive_state ds;
     drive_start(&drive, &ds);
     if ((rc = set_wheel(model, &ds, &err)))
@@ -236,9 +290,11 @@ static int run(const options *o)
             rc = cm_ckpt_adopt(ckpt_path, &err);
         if (rc == CM_OK) {
             series_free(&travel);
-            travel = (series_buf){cr.travel[0], cr.travel[1], cr.travel[2], cr.travel[3], cr.travel_n, cr.travel_n};
+            for (int k = 0; k < SER_N; k++)
+                travel.col[k] = cr.travel[k];
+            travel.n = travel.cap = cr.travel_n;
         } else {
-            for (int k = 0; k < 4; k++)
+            for (int k = 0; k < SER_N; k++)
                 free(cr.travel[k]);
         }
         if (rc || (rc = set_wheel(model, &ds, &err)))
@@ -332,8 +388,13 @@ static int run(const options *o)
             goto fail;
         }
         ipc_recv_release(ch);
+        /* The grains' force and their moment about the axle, M_o - c x F
+         * (the centre as it was when the DEM computed them). */
         double load = info[IPC_INFO_FORCE_Z];
-        if ((rc = drive_update(&drive, &ds, time + interval, interval, load, &err)))
+        const double *c = ds.center;
+        drive_soil soil = {info[IPC_INFO_FORCE_X], load,
+                           info[IPC_INFO_MOMENT_Y] - (c[2] * info[IPC_INFO_FORCE_X] - c[0] * info[IPC_INFO_FORCE_Z])};
+        if ((rc = drive_update(&drive, &ds, time + interval, interval, &soil, &err)))
             goto fail;
         if ((rc = set_wheel(model, &ds, &err)))
             goto fail;
@@ -378,22 +439,22 @@ static int run(const options *o)
         if ((rc = ipc_send_commit(ch)))
             break;
 
-        /* Record. Travel is along +x: T_H pushes the tire forward. The axle
-         * torque is the grains' moment about the wheel centre, M_o - c x F. */
-        const double *c = ds.center;
-        double axle_torque = info[IPC_INFO_MOMENT_Y] - (c[2] * info[IPC_INFO_FORCE_X] - c[0] * info[IPC_INFO_FORCE_Z]);
+        /* Record. Travel is along +x: T_H pushes the tire forward. My is the
+         * grains' moment about the axle; slip the one realised by the motion
+         * held for the next interval. */
         fem_energy en;
         fem_get_energy(model, &en);
         double th = info[IPC_INFO_TRACTION_POS], tr = info[IPC_INFO_TRACTION_NEG];
         double sinkage = bed != 0 ? bed - (ds.center[2] - drive.radius) : 0;
+        double slip = drive_realised_slip(&drive, &ds);
         double row[NCOL] = {time + interval, ds.phase, ds.center[0], ds.center[2], ds.angle, ds.omega,
-                            ds.velocity[0], ds.phase == DRIVE_TRAVEL ? drive.slip : 0,
-                            info[IPC_INFO_FORCE_X], info[IPC_INFO_FORCE_Y], info[IPC_INFO_FORCE_Z],
-                            axle_torque, th, tr, th - fabs(tr), info[IPC_INFO_CONTACTS], sinkage,
+                            ds.velocity[0], slip, info[IPC_INFO_FORCE_X], info[IPC_INFO_FORCE_Y],
+                            info[IPC_INFO_FORCE_Z], soil.my, th, tr, th - fabs(tr), info[IPC_INFO_CONTACTS], sinkage,
                             en.elastic, en.kinetic, info[IPC_INFO_DEM_WORK], w_fem};
         if ((rc = cm_h5_series_append(series, row, &err)))
             goto fail;
-        if (ds.phase == DRIVE_TRAVEL && series_push(&travel, th, tr, th - fabs(tr), sinkage)) {
+        const double travel_row[SER_N] = {th, tr, th - fabs(tr), sinkage, slip, soil.fx, soil.my};
+        if (ds.phase == DRIVE_TRAVEL && series_push(&travel, travel_row)) {
             cm_fail(&err, CM_ERR_NOMEM, "out of memory recording the traction series");
             goto fail;
         }
@@ -402,7 +463,9 @@ static int run(const options *o)
             fem_ckpt_run cr = {.exchange = n, .drive = &ds, .w_fem = w_fem,
                                .max_force_mismatch = max_force_mismatch, .max_moment_mismatch = max_moment_mismatch,
                                .n_nodes = nn, .x_prev = x_prev, .travel_n = travel.n,
-                               .travel = {travel.th, travel.tr, travel.tp, travel.sink},
+                               .travel = {travel.col[SER_TH], travel.col[SER_TR], travel.col[SER_TP],
+                                          travel.col[SER_SINK], travel.col[SER_SLIP], travel.col[SER_FX],
+                                          travel.col[SER_MY]},
                                .series_rows = cm_h5_series_rows(series)};
             double t_ck = cm_now();
             if ((rc = fem_checkpoint_write(o->out, model, &cr, scene_hash, &err)))
@@ -421,9 +484,10 @@ static int run(const options *o)
                 remaining = by_travel < remaining ? by_travel : remaining;
             }
             static const char *const phase_names[] = {"sinkage", "travel", "done", "fixed"};
-            cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %5.0f s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm",
+            cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %5.0f s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm"
+                        "  slip %5.1f %%",
                         phase_names[ds.phase], time + interval, rate, remaining > 0 ? remaining / rate : 0, load,
-                        th - fabs(tr), 1e3 * sinkage);
+                        th - fabs(tr), 1e3 * sinkage, 100 * slip);
         }
     }
     g_graceful = 0;
@@ -448,16 +512,10 @@ static int run(const options *o)
                                                         : 0.0,
                 interval);
     if (travel.n > 0) {
-        size_t start = steady_start(travel.tp, travel.n);
-        cm_log_info("traction over the steady part of the travel: from exchange %zu of %zu (t = %.3f s after "
-                    "travel began), slip %.1f %%",
-                    start, travel.n, (double)start * interval, 100 * drive.slip);
-        print_summary_line("T_H", travel.th, travel.n, start);
-        print_summary_line("T_R", travel.tr, travel.n, start);
-        print_summary_line("T_P", travel.tp, travel.n, start);
-        steady_stats sk;
-        steady_summary(travel.sink, travel.n, start, &sk);
-        cm_log_info("  sinkage mean %.1f mm (95%% CI +-%.1f mm)", 1e3 * sk.mean, 1e3 * sk.half_width);
+        print_traction_summary(&drive, &travel, interval);
+        if (drive.control != DRIVE_CONTROL_SLIP)
+            cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
+                        ds.rate_limited, travel.n);
     } else {
         cm_log_info("the wheel never reached the travel phase (target load %g N): no traction summary",
                     drive.target_load);

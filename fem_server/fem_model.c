@@ -17,8 +17,11 @@
  * pressure and 0.11 g; Coriolis with deformation rates of ~0.03 m/s
  * (a 5 mm deflection crossing the patch in ~0.2 s) is 2 omega du/dt =
  * 0.1 m/s^2 = 0.01 g; the wheel's prescribed motion has constant velocities
- * in the travel phase (no Euler term). All small against pressure and
- * contact loads, so the rim-frame model with R^T g is adequate. */
+ * in the travel phase (no Euler term), and under torque or drawbar control
+ * its accelerations are limited to wheel.max_accel (5 m/s^2 by default:
+ * rho t a = 170 Pa on the tread, 1.2e-3 of the inflation pressure). All
+ * small against pressure and contact loads, so the rim-frame model with
+ * R^T g is adequate. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -278,6 +281,19 @@ int fem_interface_nodes(const fem_model *m, uint32_t *ids)
 int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err)
 {
     return fem_mesh_write_gmsh(&m->mesh, path, err);
+}
+
+void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle)
+{
+    double mt = 0, iy = 0;
+    for (int n = 0; n < m->mesh.n_nodes; n++) {
+        const double *x = &m->mesh.x[3 * n];
+        double mn = m->s->mass[3 * n];
+        mt += mn;
+        iy += mn * (x[0] * x[0] + x[2] * x[2]);
+    }
+    *mass = mt;
+    *inertia_axle = iy;
 }
 
 int fem_interface_masses(const fem_model *m, double *mass)

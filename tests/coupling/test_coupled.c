@@ -419,6 +419,248 @@ static int guard_tire_energy_growth(void)
     return stopped_by_guard(SCENES "tire_small.cfg", "energy", extra, "fem", "energy grew", "fem.dt");
 }
 
+/* Every travel row (phase 1) of a traction.csv, or every row: the named columns. */
+typedef struct travel_rows {
+    int n;
+    double *v[12];
+} travel_rows;
+
+static void travel_rows_free(travel_rows *tr)
+{
+    for (int k = 0; k < 12; k++)
+        free(tr->v[k]);
+}
+
+static int read_rows(const char *dir, const char *const *cols, int ncols, int travel_only, travel_rows *tr)
+{
+    char path[400], line[4096];
+    snprintf(path, sizeof path, "%s/traction.csv", dir);
+    FILE *f = fopen(path, "r");
+    memset(tr, 0, sizeof *tr);
+    if (!f || !fgets(line, sizeof line, f) || ncols > 12) {
+        if (f)
+            fclose(f);
+        return -1;
+    }
+    int idx[12], phase_col = -1, col = 0, cap = 0;
+    for (int k = 0; k < ncols; k++)
+        idx[k] = -1;
+    for (char *tok = strtok(line, ",\n"); tok; tok = strtok(NULL, ",\n"), col++) {
+        for (int k = 0; k < ncols; k++)
+            if (strcmp(tok, cols[k]) == 0)
+                idx[k] = col;
+        if (strcmp(tok, "phase") == 0)
+            phase_col = col;
+    }
+    for (int k = 0; k < ncols; k++)
+        if (idx[k] < 0)
+            phase_col = -1;
+    while (phase_col >= 0 && fgets(line, sizeof line, f)) {
+        double row[64];
+        col = 0;
+        for (char *tok = strtok(line, ",\n"); tok && col < 64; tok = strtok(NULL, ",\n"))
+            row[col++] = strtod(tok, NULL);
+        if (travel_only && (int)row[phase_col] != 1)
+            continue;
+        if (tr->n == cap) {
+            cap = cap ? 2 * cap : 4096;
+            for (int k = 0; k < ncols; k++)
+                tr->v[k] = realloc(tr->v[k], (size_t)cap * sizeof(double));
+        }
+        for (int k = 0; k < ncols; k++)
+            tr->v[k][tr->n] = row[idx[k]];
+        tr->n++;
+    }
+    fclose(f);
+    return phase_col >= 0 ? tr->n : -1;
+}
+
+static double mean_of(const double *x, int from, int to)
+{
+    double s = 0;
+    for (int i = from; i < to; i++)
+        s += x[i];
+    return s / (to - from);
+}
+
+/* The realised slip recomputed from the recorded omega and v (the paper's
+ * definitions, independent of fem_server/drive.c). */
+static double slip_from(double omega, double R, double v)
+{
+    return v <= omega * R ? (omega * R - v) / (omega * R) : (omega * R - v) / v;
+}
+
+/* Braking (skid) end to end, slip control at s = -0.3 on the load-controlled
+ * small tire: v = omega R / (1 + s) and the recorded slip is s in every
+ * travel row; T_H >= 0, T_R <= 0 and F_x = T_H + T_R = T_P; over the second
+ * half of the travel the skidding wheel is held back (T_P < 0) and the grains
+ * turn it forward (moment about the axle > 0: the brake holds it). */
+static int tire_braking_skid(void)
+{
+    char scene[200], cmd[800];
+    snprintf(scene, sizeof scene, "/tmp/demfem-coupled-%d-brake.cfg", (int)getpid());
+    snprintf(cmd, sizeof cmd, "sed 's/  slip = 0.2;/  slip = -0.3;/' %stire_small_load.cfg > %s && grep -q 'slip = -0.3' %s",
+             SCENES, scene, scene);
+    ENSURE(system(cmd) == 0);
+    launch l;
+    ENSURE(start(&l, scene, "brake", NULL) == 0);
+    ENSURE(finish(&l, 300) == 0);
+    unlink(scene);
+    if (l.status != 0)
+        dump_log(&l);
+    ENSURE(l.status == 0);
+    ENSURE(strstr(log_text(&l), "slip -30.0 %"));
+    const char *cols[] = {"omega", "v", "slip", "Fx", "T_H", "T_R", "T_P", "My"};
+    travel_rows tr;
+    int n = read_rows(l.out, cols, 8, 1, &tr);
+    ENSURE(n > 1000);
+    double **c = tr.v;
+    int bad = 0;
+    for (int i = 0; i < n; i++) {
+        bad += fabs(c[0][i] - 2.0) > 1e-12 || fabs(c[1][i] - 2.0 * 0.272 / 0.7) > 1e-12;
+        bad += fabs(c[2][i] + 0.3) > 1e-12 || fabs(slip_from(c[0][i], 0.272, c[1][i]) + 0.3) > 1e-12;
+        bad += c[4][i] < 0 || c[5][i] > 0;
+        bad += fabs(c[3][i] - (c[4][i] + c[5][i])) > 1e-9 * (1 + c[4][i] - c[5][i]);
+        bad += fabs(c[6][i] - c[3][i]) > 1e-9 * (1 + c[4][i] - c[5][i]);
+    }
+    double tp = mean_of(c[6], n / 2, n), my = mean_of(c[7], n / 2, n);
+    printf("  %d travel exchanges in %.1f s; second half: T_P %.2f N, moment about the axle %.3f N m\n", n, l.wall,
+           tp, my);
+    travel_rows_free(&tr);
+    ENSURE_MSG(bad == 0, "%d inconsistent travel rows", bad);
+    ENSURE(tp < 0);
+    ENSURE(my > 0);
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+/* The moving average of the soil's force or moment that the controls use
+ * (drive.h: over control_window, folded in at every exchange from the
+ * first), recomputed from the recorded series. */
+static void control_average(const double *x, int n, double window, double dt, double *avg)
+{
+    double y = 0, b = window > dt ? dt / window : 1.0;
+    for (int i = 0; i < n; i++)
+        avg[i] = y += b * (x[i] - y);
+}
+
+/* The momentum balance of a controlled wheel over the travel rows of a run:
+ * inertia * (rate_end - rate_first) against the impulse of (prescribed +
+ * averaged soil load); the first travel row starts at zero slip without
+ * integrating. Returns the relative mismatch. */
+static double momentum_mismatch(const travel_rows *tr, int rate_col, int load_col, double inertia, double prescribed,
+                                double window, double *change, double *impulse)
+{
+    const double dt = 1e-5;
+    double *avg = malloc((size_t)tr->n * sizeof(double)), scale = 0;
+    control_average(tr->v[load_col], tr->n, window, dt, avg);
+    int first = -1;
+    *impulse = 0;
+    for (int i = 0; i < tr->n; i++) {
+        if ((int)tr->v[0][i] != 1)
+            continue;
+        if (first < 0) {
+            first = i;
+            continue;
+        }
+        *impulse += (prescribed + avg[i]) * dt;
+        scale += (fabs(prescribed) + fabs(avg[i])) * dt;
+    }
+    int last = first;
+    for (int i = first; i < tr->n; i++)
+        last = (int)tr->v[0][i] == 1 ? i : last;
+    *change = inertia * (tr->v[rate_col][last] - tr->v[rate_col][first]);
+    free(avg);
+    return fabs(*change - *impulse) / scale;
+}
+
+/* Torque control (axle torque 3 N m at v = 0.4 m/s, the tire mesh's
+ * inertia): v stays prescribed, the recorded slip is the one omega and v
+ * realise, the wheel's angular momentum changes by the impulse of the axle
+ * torque and the grains' recorded moment (averaged over control_window):
+ * I (omega_end - omega_0) = sum (T + <M_y>) dt, and the driving torque makes
+ * a driving slip. */
+static int tire_torque_control(void)
+{
+    launch l;
+    ENSURE(start(&l, SCENES "tire_small_torque.cfg", "torque", NULL) == 0);
+    ENSURE(finish(&l, 300) == 0);
+    if (l.status != 0)
+        dump_log(&l);
+    ENSURE(l.status == 0);
+    const char *log = log_text(&l);
+    double I = 0;
+    const char *p = strstr(log, "; inertia ");
+    ENSURE(p && sscanf(p, "; inertia %lf kg m^2", &I) == 1 && I > 0.1 && I < 1.0); /* the mesh's */
+    ENSURE(strstr(log, "realised, torque control") && strstr(log, "against the axle torque 3 N m"));
+    ENSURE(strstr(log, "limited the motion at 0 of")); /* else the balance below would not be exact */
+    const char *cols[] = {"phase", "omega", "v", "slip", "My"};
+    travel_rows tr;
+    int n = read_rows(l.out, cols, 5, 0, &tr);
+    ENSURE(n > 5000);
+    double **c = tr.v;
+    int bad = 0, travel = 0;
+    for (int i = 0; i < n; i++)
+        if ((int)c[0][i] == 1) {
+            travel++;
+            bad += c[2][i] != 0.4 || fabs(c[3][i] - slip_from(c[1][i], 0.272, c[2][i])) > 1e-12;
+        }
+    double dL, impulse, mis = momentum_mismatch(&tr, 1, 4, I, 3.0, 0.002, &dL, &impulse);
+    double slip = 0;
+    for (int i = n - travel / 2; i < n; i++)
+        slip += c[3][i] / (travel - travel / 2);
+    printf("  %d travel exchanges in %.1f s: I domega %.6f N m s, torque impulse %.6f N m s; slip %.1f %%\n", travel,
+           l.wall, dL, impulse, 100 * slip);
+    travel_rows_free(&tr);
+    ENSURE(travel > 5000);
+    ENSURE_MSG(bad == 0, "%d inconsistent travel rows", bad);
+    ENSURE_MSG(mis < 1e-3, "momentum mismatch %.3g (I is printed to 3 digits)", mis);
+    ENSURE(slip > 0.01 && slip < 0.9);
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
+/* Drawbar control (5 N at omega = 2 rad/s, wheel mass 3 kg): omega stays
+ * prescribed, the recorded slip is the one realised,
+ * m (v_end - v_0) = sum (<F_x> - D) dt, and pulling a load takes a driving
+ * slip. */
+static int tire_drawbar_control(void)
+{
+    launch l;
+    ENSURE(start(&l, SCENES "tire_small_drawbar.cfg", "drawbar", NULL) == 0);
+    ENSURE(finish(&l, 300) == 0);
+    if (l.status != 0)
+        dump_log(&l);
+    ENSURE(l.status == 0);
+    ENSURE(strstr(log_text(&l), "realised, drawbar control") &&
+           strstr(log_text(&l), "against the drawbar load 5 N"));
+    ENSURE(strstr(log_text(&l), "limited the motion at 0 of")); /* else the balance below would not be exact */
+    const char *cols[] = {"phase", "omega", "v", "slip", "Fx"};
+    travel_rows tr;
+    int n = read_rows(l.out, cols, 5, 0, &tr);
+    ENSURE(n > 5000);
+    double **c = tr.v;
+    int bad = 0, travel = 0;
+    for (int i = 0; i < n; i++)
+        if ((int)c[0][i] == 1) {
+            travel++;
+            bad += c[1][i] != 2.0 || fabs(c[3][i] - slip_from(c[1][i], 0.272, c[2][i])) > 1e-12;
+        }
+    double dp, impulse, mis = momentum_mismatch(&tr, 2, 4, 3.0, -5.0, 0.005, &dp, &impulse);
+    double slip = 0;
+    for (int i = n - travel / 2; i < n; i++)
+        slip += c[3][i] / (travel - travel / 2);
+    printf("  %d travel exchanges in %.1f s: m dv %.6f N s, force impulse %.6f N s; slip %.1f %%\n", travel, l.wall,
+           dp, impulse, 100 * slip);
+    travel_rows_free(&tr);
+    ENSURE(travel > 3000);
+    ENSURE_MSG(bad == 0, "%d inconsistent travel rows", bad);
+    ENSURE_MSG(mis < 1e-9, "momentum mismatch %.3g", mis);
+    ENSURE(slip > 0.01 && slip < 0.9);
+    ENSURE(shm_clean(&l));
+    return 0;
+}
+
 static const test_case tests[] = {
     {"guard_grain_overlap", guard_grain_overlap},
     {"guard_grain_non_finite", guard_grain_non_finite},
@@ -430,6 +672,9 @@ static const test_case tests[] = {
     {"plate_impact_elastic", plate_impact_elastic},
     {"plate_impact_damped", plate_impact_damped},
     {"plate_peer_killed", plate_peer_killed},
+    {"tire_braking_skid", tire_braking_skid},
+    {"tire_torque_control", tire_torque_control},
+    {"tire_drawbar_control", tire_drawbar_control},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

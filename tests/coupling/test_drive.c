@@ -8,6 +8,13 @@
 #include "steady.h"
 #include "test.h"
 
+/* drive_update with a vertical soil force only. */
+static int vertical_update(const drive_def *d, drive_state *s, double t, double dt, double load, cm_error *err)
+{
+    const drive_soil soil = {0.0, load, 0.0};
+    return drive_update(d, s, t, dt, &soil, err);
+}
+
 /* Driving and braking slip round-trip through v, and stay within [-1, 1]. */
 static int slip_definitions(void)
 {
@@ -46,7 +53,7 @@ static int phases(void)
     /* Load grows linearly with sinkage: 1000 N after 20 mm. */
     for (; s.phase == DRIVE_SINK && k < 10000; k++) {
         t += dt;
-        ENSURE(drive_update(&d, &s, t, dt, load, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, t, dt, load, &err) == CM_OK);
         load = 1000.0 * s.sunk / 0.02;
     }
     ENSURE(s.phase == DRIVE_TRAVEL);
@@ -59,7 +66,7 @@ static int phases(void)
     double x0 = s.center[0], a0 = s.angle;
     for (k = 0; s.phase == DRIVE_TRAVEL && k < 100000; k++) {
         t += dt;
-        ENSURE(drive_update(&d, &s, t, dt, load, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, t, dt, load, &err) == CM_OK);
     }
     ENSURE(s.phase == DRIVE_DONE);
     ENSURE(s.travelled >= 0.05 && s.travelled < 0.05 + 0.5 * dt);
@@ -83,11 +90,11 @@ static int load_spike_ignored(void)
     const double dt = 1e-5;
     for (int k = 0; k < 2000; k++) {
         double load = k == 500 ? 50000.0 : 300.0; /* one 50 kN spike, else 300 N */
-        ENSURE(drive_update(&d, &s, k * dt, dt, load, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, k * dt, dt, load, &err) == CM_OK);
         ENSURE_MSG(s.phase == DRIVE_SINK, "switched at step %d, average %g N", k, s.load_avg);
     }
     for (int k = 0; k < 2000 && s.phase == DRIVE_SINK; k++)
-        ENSURE(drive_update(&d, &s, k * dt, dt, 1200.0, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, k * dt, dt, 1200.0, &err) == CM_OK);
     ENSURE(s.phase == DRIVE_TRAVEL);
     ENSURE(s.load_avg >= 1000.0 && s.load_avg < 1200.0);
     return 0;
@@ -121,7 +128,7 @@ static int load_mode_settles_and_travels(void)
         double load = z < 0 ? -k * z - c * s.velocity[2] : 0.0;
         load = load > 0 ? load : 0.0;
         t += dt;
-        ENSURE(drive_update(&d, &s, t, dt, load, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, t, dt, load, &err) == CM_OK);
         max_rise = s.center[2] > max_rise ? s.center[2] : max_rise;
         if (s.phase == DRIVE_SINK)
             ENSURE(s.omega == 0.0 && s.velocity[0] == 0.0);
@@ -146,7 +153,7 @@ static int fixed_wheel_stays(void)
     drive_start(&d, &s);
     cm_error err = {0};
     for (int k = 0; k < 100; k++)
-        ENSURE(drive_update(&d, &s, k * 1e-3, 1e-3, 1e9, &err) == CM_OK);
+        ENSURE(vertical_update(&d, &s, k * 1e-3, 1e-3, 1e9, &err) == CM_OK);
     ENSURE(s.phase == DRIVE_FIXED && s.center[0] == 0.1 && s.center[2] == 0.3 && s.omega == 0 && s.angle == 0);
     return 0;
 }
@@ -160,9 +167,285 @@ static int sinkage_without_load_fails(void)
     cm_error err = {0};
     int rc = CM_OK;
     for (int k = 0; k < 1000 && rc == CM_OK; k++)
-        rc = drive_update(&d, &s, k * 1e-3, 1e-3, 0.0, &err);
+        rc = vertical_update(&d, &s, k * 1e-3, 1e-3, 0.0, &err);
     ENSURE(rc == CM_ERR_NUMERIC);
     ENSURE_MSG(strstr(err.msg, "wheel.max_sink") && strstr(err.msg, "wheel.target_load"), "%s", err.msg);
+    return 0;
+}
+
+/* ---- torque and drawbar control, the rig's damper ---------------------- */
+
+/* A wheel whose travel starts at the first update (sink_travel with no load
+ * to reach), the soil's force and moment fed back at once (no averaging). */
+static drive_def control_def(drive_control control)
+{
+    drive_def d = drive_def_default();
+    d.control = control;
+    d.target_load = 0.0;
+    d.load_window = 0.0;
+    d.control_window = 0.0;
+    d.travel_distance = 1e3;
+    d.radius = 0.3;
+    d.velocity = 0.6; /* torque: v prescribed */
+    d.omega = 2.0;    /* drawbar: omega prescribed */
+    d.inertia = 0.5;
+    d.mass = 10.0;
+    return d;
+}
+
+/* Constant soil moment: omega grows linearly, I omega' = T + M_y, from the
+ * zero-slip start omega = v / R; v and the centre's travel are as prescribed.
+ * Beyond max_accel the slope is max_accel / R; the stops hold the driven
+ * wheel at slip 0.95 and lock the braked one (slip -1). */
+static int torque_constant_moment(void)
+{
+    drive_def d = control_def(DRIVE_CONTROL_TORQUE);
+    d.torque = 3.0;
+    const drive_soil soil = {0.0, 0.0, -1.0}; /* the soil resists with 1 N m */
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-5;
+    ENSURE(drive_update(&d, &s, dt, dt, &soil, &err) == CM_OK);
+    ENSURE(s.phase == DRIVE_TRAVEL);
+    ENSURE_NEAR(s.omega, 2.0, 1e-15); /* v / R: zero slip */
+    ENSURE_NEAR(drive_realised_slip(&d, &s), 0.0, 1e-15);
+    const int n = 10000; /* 0.1 s */
+    double x0 = s.center[0], a0 = s.angle;
+    for (int k = 0; k < n; k++)
+        ENSURE(drive_update(&d, &s, (k + 2) * dt, dt, &soil, &err) == CM_OK);
+    const double alpha = (3.0 - 1.0) / 0.5, t = n * dt; /* 4 rad/s^2 */
+    ENSURE_NEAR(s.omega, 2.0 + alpha * t, 1e-9);
+    /* The angle turned at the omega held over each interval: 2 t + alpha t^2 / 2 to O(dt). */
+    ENSURE_NEAR(s.angle - a0, 2.0 * t + 0.5 * alpha * t * t, alpha * t * dt);
+    ENSURE_NEAR(s.center[0] - x0, 0.6 * t, 1e-12);
+    ENSURE(s.velocity[0] == 0.6 && s.rate_limited == 0);
+    ENSURE_NEAR(drive_realised_slip(&d, &s), 1.0 - 0.6 / (2.4 * 0.3), 1e-9);
+
+    /* A large torque: the slope is max_accel / R. */
+    d.torque = 30.0;
+    double w0 = s.omega;
+    for (int k = 0; k < n; k++)
+        ENSURE(drive_update(&d, &s, 0.1 + k * dt, dt, &soil, &err) == CM_OK);
+    ENSURE_NEAR(s.omega, w0 + d.max_accel / d.radius * t, 1e-9);
+    ENSURE(s.rate_limited == n);
+    for (int k = 0; k < 300; k++) /* 3 s, the stop at slip 0.95 */
+        ENSURE(drive_update(&d, &s, 1.0, 1e-2, &soil, &err) == CM_OK);
+    ENSURE_NEAR(drive_realised_slip(&d, &s), DRIVE_SLIP_LIMIT, 1e-12);
+    /* Braking harder than the soil drives: the wheel locks, slip -1. */
+    d.torque = -5.0;
+    for (int k = 0; k < 1000; k++)
+        ENSURE(drive_update(&d, &s, 5.0, 1e-2, &soil, &err) == CM_OK);
+    ENSURE(s.omega == 0.0);
+    ENSURE_NEAR(drive_realised_slip(&d, &s), -1.0, 1e-15);
+    ENSURE(s.velocity[0] == 0.6);
+    return 0;
+}
+
+/* A soil whose traction grows linearly with the slip, F_x = K s (moment
+ * about the axle -R F_x), with the averaging on: the driven wheel settles
+ * at the slip where the soil carries the torque, s = T / (R K), and the
+ * braked one at s = T / (R K) < 0, the averaged moment equal to -T. */
+static int torque_settles_at_equilibrium(void)
+{
+    const double K = 200.0;
+    for (int sign = 1; sign >= -1; sign -= 2) {
+        drive_def d = control_def(DRIVE_CONTROL_TORQUE);
+        d.control_window = 0.002;
+        d.torque = sign * 6.0;
+        drive_state s;
+        drive_start(&d, &s);
+        cm_error err = {0};
+        const double dt = 1e-5;
+        for (int k = 0; k < 50000; k++) { /* 0.5 s: time constant ~20 ms */
+            double slip = drive_realised_slip(&d, &s);
+            const drive_soil soil = {K * slip, 0.0, -d.radius * K * slip};
+            ENSURE(drive_update(&d, &s, (k + 1) * dt, dt, &soil, &err) == CM_OK);
+        }
+        double expect = d.torque / (d.radius * K); /* +-0.1 */
+        printf("  torque %+g N m: slip %.6f (closed form %.6f), soil moment %.6f N m\n", d.torque,
+               drive_realised_slip(&d, &s), expect, s.my_avg);
+        ENSURE_NEAR(drive_realised_slip(&d, &s), expect, 1e-6);
+        ENSURE_NEAR(s.my_avg, -d.torque, 1e-4);
+        ENSURE(s.velocity[0] == d.velocity);
+    }
+    return 0;
+}
+
+/* Drawbar control: a constant soil force makes v linear, m v' = F_x - D,
+ * from the zero-slip start v = omega R; a soil with F_x = K s settles at
+ * s = D / K; a drawbar load beyond what the soil can give (K at slip 1)
+ * stops the wheel (v = 0, slip 1); a push (D < 0) on a soil that brakes
+ * (F_x = K s < 0 when skidding) settles at the braking slip D / K. */
+static int drawbar_control(void)
+{
+    drive_def d = control_def(DRIVE_CONTROL_DRAWBAR);
+    d.drawbar = 10.0;
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-5;
+    drive_soil soil = {30.0, 0.0, 0.0};
+    ENSURE(drive_update(&d, &s, dt, dt, &soil, &err) == CM_OK);
+    ENSURE(s.phase == DRIVE_TRAVEL);
+    ENSURE_NEAR(s.velocity[0], 0.6, 1e-15); /* omega R: zero slip */
+    for (int k = 0; k < 10000; k++)
+        ENSURE(drive_update(&d, &s, (k + 2) * dt, dt, &soil, &err) == CM_OK);
+    ENSURE_NEAR(s.velocity[0], 0.6 + (30.0 - 10.0) / 10.0 * 0.1, 1e-9);
+    ENSURE(s.omega == 2.0 && s.rate_limited == 0);
+    ENSURE(drive_realised_slip(&d, &s) < 0); /* pushed faster than it rolls: braking slip */
+
+    const double K = 200.0;
+    const double loads[] = {20.0, -20.0, 300.0};
+    const double expect[] = {0.1, -0.1, 1.0};
+    for (int c = 0; c < 3; c++) {
+        d = control_def(DRIVE_CONTROL_DRAWBAR);
+        d.control_window = 0.002;
+        d.drawbar = loads[c];
+        drive_start(&d, &s);
+        for (int k = 0; k < 100000; k++) { /* 1 s: time constant m omega R / K = 30 ms */
+            double slip = drive_realised_slip(&d, &s);
+            soil.fx = K * slip;
+            ENSURE(drive_update(&d, &s, (k + 1) * dt, dt, &soil, &err) == CM_OK);
+        }
+        printf("  drawbar %+g N: slip %.6f (expected %.6f), soil force %.4f N, v %.5f m/s\n", d.drawbar,
+               drive_realised_slip(&d, &s), expect[c], s.fx_avg, s.velocity[0]);
+        ENSURE_NEAR(drive_realised_slip(&d, &s), expect[c], 1e-6);
+        if (c < 2)
+            ENSURE_NEAR(s.fx_avg, d.drawbar, 1e-4);
+        else
+            ENSURE(s.velocity[0] == 0.0 && s.rate_limited > 0);
+    }
+    return 0;
+}
+
+/* Slip control: the recorded (realised) slip is the prescribed one, driving
+ * and braking, in both motions, throughout the travel. */
+static int slip_control_realises_slip(void)
+{
+    const double slips[] = {-0.9, -0.3, -0.05, 0.0, 0.05, 0.3, 0.9};
+    for (int m = 0; m < 2; m++)
+        for (int i = 0; i < 7; i++) {
+            drive_def d = control_def(DRIVE_CONTROL_SLIP);
+            d.motion = m ? DRIVE_LOAD_TRAVEL : DRIVE_SINK_TRAVEL;
+            d.load_ramp = 0.0;
+            d.target_load = 100.0;
+            d.slip = slips[i];
+            d.damping = 2.0 * sqrt(1e6 * d.mass); /* critical on the soil below */
+            drive_state s;
+            drive_start(&d, &s);
+            cm_error err = {0};
+            int travel = 0;
+            for (int k = 0; k < 3000; k++) {
+                /* A stiff linear soil under the load_travel wheel; the
+                 * sink_travel wheel sees 100 N at once. */
+                double fz = m ? (s.center[2] < 0 ? -1e6 * s.center[2] : 0.0) : 100.0;
+                const drive_soil soil = {-50.0, fz, 20.0};
+                ENSURE(drive_update(&d, &s, (k + 1) * 1e-4, 1e-4, &soil, &err) == CM_OK);
+                if (s.phase == DRIVE_TRAVEL) {
+                    travel++;
+                    ENSURE_NEAR(drive_realised_slip(&d, &s), d.slip, 1e-12);
+                    ENSURE(s.omega == d.omega);
+                } else {
+                    ENSURE(drive_realised_slip(&d, &s) == 0.0);
+                }
+            }
+            ENSURE_MSG(travel > 1000, "motion %d slip %g: %d travel updates", m, d.slip, travel);
+        }
+    return 0;
+}
+
+/* The rig's damper on the load_travel wheel: on a linear undamped soil
+ * (F = k (0 - z)) the load W applied at once gives the damped step response
+ *   z(t) = -W/k (1 - e^(-zeta w t) (cos w_d t + zeta / sqrt(1 - zeta^2) sin w_d t)),
+ * with the default damper zeta = 0.3 for the reference soil stiffness: the
+ * heave decays to 14 % per period, where the undamped wheel keeps heaving. */
+static int damper_decays_heave(void)
+{
+    const double k = DRIVE_SOIL_STIFFNESS_REF, m = 20.0, W = 1000.0;
+    const double wn = sqrt(k / m), zeta = DRIVE_DAMPING_RATIO_DEFAULT;
+    const double wd = wn * sqrt(1 - zeta * zeta), period = 2 * M_PI / wd, zs = W / k;
+    ENSURE_NEAR(drive_default_damping(m), zeta * 2 * sqrt(k * m), 1e-9);
+    for (int damped = 2; damped >= 0; damped--) { /* 2: heave damper, 1: plain, 0: none */
+        drive_def d = control_def(DRIVE_CONTROL_SLIP);
+        d.motion = DRIVE_LOAD_TRAVEL;
+        d.mass = m;
+        d.damping = damped ? drive_default_damping(m) : 0.0;
+        d.damping_window = damped == 2 ? DRIVE_DAMPING_WINDOW_DEFAULT : 0.0; /* 1: the textbook oscillator */
+        d.target_load = W;
+        d.load_ramp = 0.0;
+        d.sink_velocity = 10.0; /* the rig's lowering speed limit out of the way */
+        d.center[2] = 0.0;      /* on the surface */
+        drive_state s;
+        drive_start(&d, &s);
+        cm_error err = {0};
+        const double dt = 1e-5;
+        double max_err = 0, late_amp = 0;
+        const int n = (int)(8 * period / dt);
+        for (int i = 0; i < n; i++) {
+            double z = s.center[2], t = i * dt;
+            const drive_soil soil = {0.0, z < 0 ? -k * z : 0.0, 0.0};
+            if (damped == 1) {
+                double zx = -zs * (1 - exp(-zeta * wn * t) * (cos(wd * t) + zeta / sqrt(1 - zeta * zeta) * sin(wd * t)));
+                max_err = fmax(max_err, fabs(z - zx));
+            }
+            if (t > 7 * period)
+                late_amp = fmax(late_amp, fabs(z + zs));
+            ENSURE(drive_update(&d, &s, t + dt, dt, &soil, &err) == CM_OK);
+        }
+        static const char *const names[] = {"undamped", "plain damper", "heave damper"};
+        if (damped == 1)
+            printf("  plain damper (zeta 0.3): largest deviation from the closed form %.3g of W/k\n", max_err / zs);
+        printf("  %s: heave after 7 periods %.3g of W/k\n", names[damped], late_amp / zs);
+        if (damped == 2) {
+            ENSURE(late_amp < 1e-4 * zs);
+            ENSURE(s.phase == DRIVE_TRAVEL);
+        } else if (damped) {
+            ENSURE(max_err < 0.01 * zs);
+            ENSURE(late_amp < 1e-3 * zs); /* 0.14^7 = 1e-6 of the first overshoot */
+            ENSURE(s.phase == DRIVE_TRAVEL); /* settled: it travels */
+        } else {
+            ENSURE(late_amp > 0.9 * zs); /* still heaving by the full static sinkage */
+        }
+    }
+    return 0;
+}
+
+/* A wheel sinking at v0 into a soil that carries exactly the load (a
+ * plastic soil, F = W): a plain damper brakes it to rest (time constant
+ * m / c); the heave damper acts on z' - u, u the mean of z' over the window
+ * tau, so m z' + c tau u is conserved and the wheel goes on sinking at
+ * m v0 / (m + c tau) with the damper carrying nothing. */
+static int damper_spares_steady_sinkage(void)
+{
+    const double m = 20.0, W = 1000.0, v0 = 0.05, c = drive_default_damping(m);
+    for (int windowed = 0; windowed < 2; windowed++) {
+        drive_def d = control_def(DRIVE_CONTROL_SLIP);
+        d.motion = DRIVE_LOAD_TRAVEL;
+        d.mass = m;
+        d.damping = c;
+        d.damping_window = windowed ? DRIVE_DAMPING_WINDOW_DEFAULT : 0.0;
+        d.target_load = W;
+        d.load_ramp = 0.0;
+        d.sink_velocity = 10.0;
+        d.max_sink = 100.0;
+        drive_state s;
+        drive_start(&d, &s);
+        s.velocity[2] = -v0;
+        cm_error err = {0};
+        const double dt = 1e-5;
+        const drive_soil soil = {0.0, W, 0.0};
+        for (int i = 0; i < 20000; i++) /* 0.2 s: 12 m / c, 10 windows */
+            ENSURE(drive_update(&d, &s, (i + 1) * dt, dt, &soil, &err) == CM_OK);
+        double vz = -s.velocity[2], expect = windowed ? m * v0 / (m + c * d.damping_window) : 0.0;
+        printf("  %s damper: sinks at %.5f m/s after 0.2 s (closed form %.5f), damper force %.3f N\n",
+               windowed ? "heave" : "plain", vz, expect, c * (s.vz_avg - s.velocity[2]));
+        ENSURE_NEAR(vz, expect, 0.01 * v0);
+        if (windowed) {
+            ENSURE(s.phase == DRIVE_SINK); /* still sinking: no travel */
+            ENSURE(fabs(c * (s.velocity[2] - s.vz_avg)) < 1e-3 * W);
+        }
+    }
     return 0;
 }
 
@@ -223,6 +506,12 @@ static const test_case tests[] = {
     {"fixed_wheel_stays", fixed_wheel_stays},
     {"sinkage_without_load_fails", sinkage_without_load_fails},
     {"steady_detection_and_coverage", steady_detection_and_coverage},
+    {"torque_constant_moment", torque_constant_moment},
+    {"torque_settles_at_equilibrium", torque_settles_at_equilibrium},
+    {"drawbar_control", drawbar_control},
+    {"slip_control_realises_slip", slip_control_realises_slip},
+    {"damper_decays_heave", damper_decays_heave},
+    {"damper_spares_steady_sinkage", damper_spares_steady_sinkage},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -153,6 +153,7 @@ void dem_world_destroy(dem_world **wp)
     free(g->inertia);
     free(g->angmom);
     free(w->shapes);
+    free(w->pose);
     free(w->grain_cell);
     free(w->cell_start);
     free(w->cell_items);
@@ -786,6 +787,8 @@ int dem_world_prepare(dem_world *w, cm_error *err)
         memset(g->wall_mask, 0, (size_t)g->cap * sizeof *g->wall_mask);
     }
     int rc = check_dt(w, err);
+    if (rc == CM_OK)
+        rc = dem_shaped_pose_alloc(w, err);
     if (rc)
         return rc;
     w->need_rebuild = 1;
@@ -968,6 +971,8 @@ int dem_step_grains(dem_world *w, cm_error *err)
     int contacts = 0;
     const int np = w->n_pairs;
     const int shaped = w->n_shaped > 0;
+    if (shaped)
+        dem_shaped_pose_update(w);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif

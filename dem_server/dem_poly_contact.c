@@ -313,14 +313,24 @@ static void clip_faces(const posed_hull *a, const posed_hull *b, const plane_set
             const double *pl = b->f + 4 * cut[q];
             const double off = pl[3] + pl[0] * b->c[0] + pl[1] * b->c[1] + pl[2] * b->c[2];
             double (*in)[3] = poly[cur], (*res)[3] = poly[cur ^ 1];
+            double dist[CLIP_MAX];
+            int n_out = 0;
+            for (int k = 0; k < np; k++) {
+                dist[k] = in[k][0] * pl[0] + in[k][1] * pl[1] + in[k][2] * pl[2] - off;
+                n_out += out_of(dist[k], side);
+            }
+            if (n_out == 0) /* an earlier plane already cut away what this one would */
+                continue;
+            if (n_out == np) {
+                np = 0;
+                break;
+            }
             int nr = 0;
-            const double *pp = in[np - 1];
-            double dprev = pp[0] * pl[0] + pp[1] * pl[1] + pp[2] * pl[2] - off;
-            for (int k = 0; k < np; pp = in[k++]) {
-                const double *pc = in[k];
-                double dc = pc[0] * pl[0] + pc[1] * pl[1] + pc[2] * pl[2] - off;
-                if (out_of(dprev, side) != out_of(dc, side) && nr < CLIP_MAX) { /* the edge crosses: its crossing point */
-                    double t = dprev / (dprev - dc);
+            for (int k = 0, kp = np - 1; k < np; kp = k++) {
+                const double *pp = in[kp], *pc = in[k];
+                double dp = dist[kp], dc = dist[k];
+                if (out_of(dp, side) != out_of(dc, side) && nr < CLIP_MAX) { /* the edge crosses: its crossing point */
+                    double t = dp / (dp - dc);
                     for (int d = 0; d < 3; d++)
                         res[nr][d] = pp[d] + t * (pc[d] - pp[d]);
                     nr++;
@@ -329,7 +339,6 @@ static void clip_faces(const posed_hull *a, const posed_hull *b, const plane_set
                     memcpy(res[nr], pc, sizeof res[nr]);
                     nr++;
                 }
-                dprev = dc;
             }
             np = nr;
             cur ^= 1;

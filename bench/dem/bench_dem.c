@@ -157,7 +157,11 @@ static int run_shapes(const char *dir, int threads, int steps, int n, cm_error *
      * callgrind count of the steps alone) */
     const char *wu = getenv("DEM_BENCH_WARMUP");
     int warmup = wu ? atoi(wu) : 200;
+    /* DEM_BENCH_ONLY=spheres or angular: time that bed alone (a callgrind count of one kind) */
+    const char *only = getenv("DEM_BENCH_ONLY");
     for (int kind = 0; kind < 2; kind++) {
+        if (only && strcmp(only, kind ? "angular" : "spheres") != 0)
+            continue;
         dem_world *w = NULL;
         int rc = make_shapes_world(threads, dir, n, kind, &w, err);
         for (int k = 0; k < warmup && rc == CM_OK; k++)

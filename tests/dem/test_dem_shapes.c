@@ -2,7 +2,9 @@
  * resting and sliding on planes, the libccd narrow phase against the closed
  * form of the sphere path, triangle surfaces, and the angle of repose of
  * angular grains against spheres. */
+#include <hdf5.h>
 #include <stdlib.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "dem_shape.h"
@@ -846,6 +848,94 @@ static int poly_force_gradient(void)
     return 0;
 }
 
+static int read_ds(hid_t f, const char *name, hid_t type, void *buf)
+{
+    hid_t d = H5Dopen2(f, name, H5P_DEFAULT);
+    if (d < 0)
+        return -1;
+    herr_t st = H5Dread(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, buf);
+    H5Dclose(d);
+    return st < 0 ? -1 : 0;
+}
+
+/* Grain output with shaped grains: each frame carries the orientation
+ * quaternion, shape id, scale and the long axis (rotated here with q v q*,
+ * independently of the library's matrix), /shapes the hull vertices once;
+ * the XDMF file names the new attributes. A box 6 x 2 x 1 mm: long axis
+ * half-length 3 mm along the rotated x. A sphere-only world writes none of
+ * them (its output is unchanged). */
+static int shaped_output(void)
+{
+    dem_material m = test_material(1e7, 0.3, 0.5, 0.5);
+    cm_error err = {0};
+    for (int shaped = 0; shaped < 2; shaped++) {
+        char dir[] = "/tmp/dem_shape_out_XXXXXX";
+        ENSURE(mkdtemp(dir));
+        dem_world *w = test_world(&m, 1, 1e-5, 3, NULL, 1);
+        ENSURE(w);
+        dem_shape_def box = box_def(6e-3, 2e-3, 1e-3);
+        int sh;
+        ENSURE(dem_shape_add(w, &box, &sh, &err) == 0);
+        double x0[3] = {0, 0, 0}, x1[3] = {0.02, 0, 0}, x2[3] = {0, 0.02, 0}, q[4], ax[3] = {0.2, -0.7, 0.4};
+        quat_axis_angle(ax, 1.1, q);
+        ENSURE(dem_grain_add(w, x0, 1e-3, 0, NULL, &err) == 0);
+        if (shaped) {
+            ENSURE(dem_grain_add_shape(w, x1, q, sh, 1.0, 0, NULL, &err) == 0);
+            ENSURE(dem_grain_add_shape(w, x2, q, sh, 0.5, 0, NULL, &err) == 0);
+        }
+        dem_output *o = NULL;
+        ENSURE_MSG(dem_output_open(dir, &o, &err) == 0, "%s", err.msg);
+        ENSURE(dem_output_frame(o, w, &err) == 0 && dem_output_frame(o, w, &err) == 0);
+        dem_output_close(&o);
+        char path[256];
+        snprintf(path, sizeof path, "%s/dem_grains.h5", dir);
+        hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+        ENSURE(f >= 0);
+        H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+        double qq[3][4], la[3][3], scale[3], hv[8][3];
+        int sid[3];
+        int has = read_ds(f, "/frame_000001/orientation", H5T_NATIVE_DOUBLE, qq) == 0;
+        ENSURE(has == shaped);
+        if (shaped) {
+            ENSURE(read_ds(f, "/frame_000001/long_axis", H5T_NATIVE_DOUBLE, la) == 0);
+            ENSURE(read_ds(f, "/frame_000001/scale", H5T_NATIVE_DOUBLE, scale) == 0);
+            ENSURE(read_ds(f, "/frame_000001/shape", H5T_NATIVE_INT, sid) == 0);
+            ENSURE(read_ds(f, "/shapes/shape_000", H5T_NATIVE_DOUBLE, hv) == 0);
+            ENSURE(sid[0] == -1 && sid[1] == sh && sid[2] == sh);
+            ENSURE(scale[0] == 1e-3 && scale[1] == 1.0 && scale[2] == 0.5);
+            ENSURE(la[0][0] == 0.0 && la[0][1] == 0.0 && la[0][2] == 0.0);
+            for (int k = 0; k < 4; k++)
+                ENSURE_NEAR(qq[1][k] - q[k], 0.0, 1e-15);
+            /* q (1,0,0) q*: the rotated x axis, times the half-length */
+            double w0 = q[0], v[3] = {q[1], q[2], q[3]};
+            double ex[3] = {1 - 2 * (v[1] * v[1] + v[2] * v[2]), 2 * (v[0] * v[1] + w0 * v[2]), 2 * (v[0] * v[2] - w0 * v[1])};
+            for (int k = 0; k < 3; k++) {
+                ENSURE_NEAR(fabs(la[1][k]) - fabs(3e-3 * ex[k]), 0.0, 1e-15);
+                ENSURE_NEAR(fabs(la[2][k]) - fabs(1.5e-3 * ex[k]), 0.0, 1e-15);
+            }
+            for (int t = 0; t < 8; t++) /* the box's corners about its centre */
+                ENSURE_NEAR(fabs(hv[t][0]) + fabs(hv[t][1]) + fabs(hv[t][2]) - 4.5e-3, 0.0, 1e-15);
+        }
+        H5Fclose(f);
+        unlink(path);
+        snprintf(path, sizeof path, "%s/dem_grains.xmf", dir);
+        FILE *x = fopen(path, "r");
+        ENSURE(x);
+        char text[16384];
+        size_t nr = fread(text, 1, sizeof text - 1, x);
+        text[nr] = '\0';
+        fclose(x);
+        ENSURE((strstr(text, "long_axis") != NULL) == shaped && (strstr(text, "orientation") != NULL) == shaped);
+        unlink(path);
+        snprintf(path, sizeof path, "%s/dem_series.csv", dir);
+        unlink(path);
+        rmdir(dir);
+        dem_world_destroy(&w);
+    }
+    printf("shaped_output: orientation, long_axis, shape, scale and /shapes written for shaped grains only\n");
+    return 0;
+}
+
 /* A scene mixing spheres (bottom layer) and random angular grains (top
  * layer), read from scene text: keys checked (an unknown key is caught), the
  * bed placed, settled, cached and reloaded bit for bit (orientations and
@@ -942,6 +1032,7 @@ static const test_case tests[] = {
     {"elastic_collisions", elastic_collisions},
     {"poly_overlap_volume", poly_overlap_volume},
     {"poly_force_gradient", poly_force_gradient},
+    {"shaped_output", shaped_output},
     {"angle_of_repose", angle_of_repose},
     {"shaped_on_triangles", shaped_on_triangles},
     {"sphere_triangle_vs_ccd", sphere_triangle_vs_ccd},

@@ -16,7 +16,9 @@ int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
         (rc = cm_scene_int_opt(s, "coupling.exchange_every", 1, 100000, 1, &every, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.stall_timeout", 0.1, 60.0, 1.0, &c->stall_timeout, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.connect_timeout", 1.0, 3600.0, 120.0, &c->connect_timeout, err)) ||
-        (rc = cm_scene_double_opt(s, "coupling.max_overlap", 0.0, 1.0, 0.2, &c->max_overlap, err)))
+        (rc = cm_scene_double_opt(s, "coupling.max_overlap", 0.0, 1.0, 0.2, &c->max_overlap, err)) ||
+        (rc = cm_scene_double_opt(s, "coupling.max_surface_overlap", 0.0, 1.0, 0.5, &c->max_surface_overlap,
+                                  err)))
         return rc;
     c->exchange_every = (int)every;
     if (cm_scene_has(s, "run.target")) {

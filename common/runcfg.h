@@ -16,8 +16,11 @@ typedef struct cm_run_config {
     int exchange_every;    /* coupling.exchange_every: DEM steps per exchange (default 1) */
     double stall_timeout;  /* coupling.stall_timeout, s: peer silent this long counts as dead (default 1) */
     double connect_timeout;/* coupling.connect_timeout, s: wait this long for the peer to start (default 120) */
-    double max_overlap;    /* coupling.max_overlap: stop when a grain overlap exceeds this fraction of its
-                              radius (default 0.2; 0 = never) */
+    double max_overlap;    /* coupling.max_overlap: stop when a grain–grain or grain–wall overlap exceeds this
+                              fraction of the radius (default 0.2; 0 = never) */
+    double max_surface_overlap; /* coupling.max_surface_overlap: the same for grain–tire contacts (default
+                              0.5: a grain pressed into the soft tread indents it ~15-20 % of its radius
+                              under ~50 N, which is the rubber's real local deformation, not a failure) */
     /* run.target = { quantity = "drawbar_pull"; tolerance = 0.05; study = "tire_small"; }: the accuracy the
      * user asks for. The launcher (bench/study/choose.py) picks the settings from the study results before
      * the servers start; the servers only check the keys. Empty quantity: no target. */

@@ -262,7 +262,8 @@ typedef struct dem_stats {
     double pe_grav;       /* J, -m g.x summed */
     double e_elastic;     /* J, normal Hertz energy 8/15 E* sqrt(R*) delta^(5/2) */
     int contacts_gg, contacts_gw, contacts_gs;
-    double max_overlap;   /* largest delta / r_min of a pair, grain–surface contacts included */
+    double max_overlap;   /* largest delta / r_min of a grain–grain or grain–wall pair */
+    double max_overlap_surface; /* largest grain–surface overlap / grain radius in the last step */
     dem_profile profile;
 } dem_stats;
 

@@ -64,6 +64,15 @@ static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
                        "coupling.max_overlap = %.0f %%): the contacts are too soft for the load or coupling.dt is "
                        "too long; raise the soil's young modulus or reduce coupling.dt",
                        100 * s.max_overlap, s.time, s.step, 100 * def->max_overlap);
+    /* Against the soft tread a grain's Hertz indentation is the rubber's real
+     * deformation; only far beyond it (the grain about to pass the triangle,
+     * whose contact is two-sided) is the run failing. */
+    if (def->max_surface_overlap > 0 && s.max_overlap_surface > def->max_surface_overlap)
+        return cm_fail(err, CM_ERR_NUMERIC,
+                       "a grain pressed into the tire by %.0f %% of its radius at t = %.4f s (step %ld; limit "
+                       "coupling.max_surface_overlap = %.0f %%): the tread's contact is too soft for the load or "
+                       "coupling.dt is too long; raise the tread material's young modulus or reduce coupling.dt",
+                       100 * s.max_overlap_surface, s.time, s.step, 100 * def->max_surface_overlap);
     return CM_OK;
 }
 

@@ -21,7 +21,8 @@ typedef struct dem_coupled_def {
     double connect_timeout; /* s */
     double progress_every;  /* s of wall time between progress lines; 0 = none */
     int surface_material;   /* material index of the tire surface */
-    double max_overlap;     /* stop when a grain overlap exceeds this fraction of the radius (0 = never) */
+    double max_overlap;     /* stop when a grain–grain/wall overlap exceeds this fraction of the radius (0 = never) */
+    double max_surface_overlap; /* the same for grain–tire overlaps (0 = never) */
     double bed_height;      /* m, undisturbed bed surface, sent for sinkage (0 = none) */
     double bed_top;         /* m, highest grain top z + r, sent for placing the wheel (0 = none) */
     volatile sig_atomic_t *stop_flag;  /* raised: stop at once (waits are abandoned) */

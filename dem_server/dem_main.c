@@ -216,6 +216,7 @@ static int run(const options *o)
                            .progress_every = rcfg.progress_every,
                            .surface_material = surface_material,
                            .max_overlap = rcfg.max_overlap,
+                           .max_surface_overlap = rcfg.max_surface_overlap,
                            .stop_flag = &g_stop};
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */

@@ -1,10 +1,17 @@
 /* Grain-state output: one HDF5 file with a group per frame, an XDMF file
  * beside it that ParaView opens as a time series of Polyvertex grids
  * (position, velocity, radius, angular velocity, contact count), and a CSV
- * time series of energies and contact counts. Not in the hot loop: buffers
- * are allocated per frame. */
+ * time series of energies and contact counts. With shaped grains in the
+ * world, each frame also holds orientation (n x 4 quaternion w x y z, body
+ * principal frame -> world), shape (shape id, -1 sphere), scale and
+ * long_axis (the principal axis of least inertia, the longest, times the
+ * grain's half-length along it: a vector for ParaView's glyphs; zero for
+ * spheres), and /shapes the hull vertices of each polyhedral shape once
+ * (principal frame, scale 1: a grain's corners are x + scale R(q) v).
+ * Not in the hot loop: buffers are allocated per frame. */
 #include <errno.h>
 #include <hdf5.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,6 +23,8 @@
 struct dem_output {
     char dir[1024];
     hid_t h5;
+    int shaped;        /* the frames carry orientation, shape, scale, long_axis */
+    int shapes_written;
     FILE *series;
     int n_frames, cap_frames;
     long series_rows;
@@ -48,7 +57,7 @@ int dem_output_open(const char *dir, dem_output **out, cm_error *err)
         return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
     }
     fprintf(o->series,
-            "time_s,step,ke_trans_J,ke_rot_J,contacts_grain,contacts_wall,contacts_surface,max_overlap,grains,frozen\n");
+            "time_s,step,ke_trans_J,ke_rot_J,contacts_grain,contacts_wall,contacts_surface,max_overlap,grains,frozen,max_overlap_surface\n");
     *out = o;
     return CM_OK;
 }
@@ -94,12 +103,86 @@ static int write_xdmf(const dem_output *o, cm_error *err)
                    "</DataItem>\n    </Attribute>\n", n, k);
         fprintf(f, "    <Attribute Name=\"tag\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
                    "Dimensions=\"%d\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">dem_grains.h5:/frame_%06d/tag"
-                   "</DataItem>\n    </Attribute>\n   </Grid>\n", n, k);
+                   "</DataItem>\n    </Attribute>\n", n, k);
+        if (o->shaped) {
+            fprintf(f, "    <Attribute Name=\"long_axis\" AttributeType=\"Vector\" Center=\"Node\">\n     <DataItem "
+                       "Dimensions=\"%d 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">dem_grains.h5:/frame_%06d/"
+                       "long_axis</DataItem>\n    </Attribute>\n", n, k);
+            fprintf(f, "    <Attribute Name=\"orientation\" AttributeType=\"Matrix\" Center=\"Node\">\n     <DataItem "
+                       "Dimensions=\"%d 4\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">dem_grains.h5:/frame_%06d/"
+                       "orientation</DataItem>\n    </Attribute>\n", n, k);
+            fprintf(f, "    <Attribute Name=\"shape\" AttributeType=\"Scalar\" Center=\"Node\">\n     <DataItem "
+                       "Dimensions=\"%d\" NumberType=\"Int\" Precision=\"4\" Format=\"HDF\">dem_grains.h5:/frame_%06d/shape"
+                       "</DataItem>\n    </Attribute>\n", n, k);
+        }
+        fprintf(f, "   </Grid>\n");
     }
     fprintf(f, "  </Grid>\n </Domain>\n</Xdmf>\n");
     if (fclose(f) != 0 || rename(tmp, path) != 0)
         return cm_fail(err, CM_ERR_IO, "%s: %s", path, strerror(errno));
     return CM_OK;
+}
+
+/* The shapes' hull vertices, once (group /shapes, dataset shape_NNN per
+ * polyhedral shape, attribute type on each). */
+static int write_shapes(const dem_world *w, hid_t h5)
+{
+    hid_t grp = H5Gcreate2(h5, "shapes", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    int bad = grp < 0;
+    for (int k = 0; k < w->n_shapes && !bad; k++) {
+        const dem_shape *s = &w->shapes[k];
+        if (s->type != DEM_SHAPE_POLYHEDRON)
+            continue;
+        char name[32];
+        snprintf(name, sizeof name, "shape_%03d", k);
+        bad = write_ds(grp, name, H5T_NATIVE_DOUBLE, s->n_verts, 3, s->v);
+    }
+    if (grp >= 0)
+        H5Gclose(grp);
+    return bad;
+}
+
+/* Per-frame orientation, shape id, scale and long axis (see the top). */
+static int write_shaped(dem_output *o, const dem_world *w, hid_t grp)
+{
+    const dem_grains *g = &w->g;
+    int n = g->n;
+    if (!o->shapes_written) {
+        if (write_shapes(w, o->h5))
+            return -1;
+        o->shapes_written = 1;
+    }
+    o->shaped = 1;
+    double *q = malloc((size_t)n * 4 * sizeof *q), *ax = malloc((size_t)n * 3 * sizeof *ax);
+    double *sc = malloc((size_t)n * sizeof *sc);
+    int *sh = malloc((size_t)n * sizeof *sh);
+    int bad = !q || !ax || !sc || !sh;
+    for (int id = 0; id < n && !bad; id++) {
+        int i = g->slot_of[id], k = g->shape[i];
+        memcpy(q + 4 * id, g->q + 4 * i, 4 * sizeof *q);
+        sh[id] = k;
+        sc[id] = k < 0 ? g->r[i] : g->sc[i];
+        double half = 0.0;
+        if (k >= 0) {
+            const dem_shape *s = &w->shapes[k];
+            if (s->type == DEM_SHAPE_POLYHEDRON)
+                for (int t = 0; t < s->n_verts; t++)
+                    half = fmax(half, fabs(s->v[t][0]));
+            else
+                half = s->a[0];
+            half *= g->sc[i];
+        }
+        double R[9];
+        dem_quat_to_mat(g->q + 4 * i, R);
+        for (int c = 0; c < 3; c++) /* first column of R: body axis 1 in the world */
+            ax[3 * id + c] = half * R[3 * c];
+    }
+    if (!bad)
+        bad = write_ds(grp, "orientation", H5T_NATIVE_DOUBLE, n, 4, q) ||
+              write_ds(grp, "long_axis", H5T_NATIVE_DOUBLE, n, 3, ax) ||
+              write_ds(grp, "scale", H5T_NATIVE_DOUBLE, n, 1, sc) || write_ds(grp, "shape", H5T_NATIVE_INT, n, 1, sh);
+    free(q), free(ax), free(sc), free(sh);
+    return bad ? -1 : 0;
 }
 
 int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
@@ -154,6 +237,8 @@ int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err)
     if (!bad)
         bad = write_ds(grp, "radius", H5T_NATIVE_DOUBLE, n, 1, rad) || write_ds(grp, "contacts", H5T_NATIVE_INT, n, 1, cnt) ||
               write_ds(grp, "tag", H5T_NATIVE_INT, n, 1, tag);
+    if (!bad && w->n_shaped > 0)
+        bad = write_shaped(o, w, grp);
     if (!bad) {
         hid_t sp = H5Screate(H5S_SCALAR);
         hid_t at = H5Acreate2(grp, "time", H5T_NATIVE_DOUBLE, sp, H5P_DEFAULT, H5P_DEFAULT);
@@ -180,8 +265,9 @@ int dem_output_series(dem_output *o, const dem_world *w, cm_error *err)
 {
     dem_stats s;
     dem_world_stats(w, &s);
-    if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g,%d,%d\n", s.time, s.step, s.ke_trans, s.ke_rot,
-                s.contacts_gg, s.contacts_gw, s.contacts_gs, s.max_overlap, s.grains, s.frozen) < 0 ||
+    if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g,%d,%d,%.6g\n", s.time, s.step, s.ke_trans, s.ke_rot,
+                s.contacts_gg, s.contacts_gw, s.contacts_gs, s.max_overlap, s.grains, s.frozen,
+                s.max_overlap_surface) < 0 ||
         fflush(o->series) != 0)
         return cm_fail(err, CM_ERR_IO, "%s/dem_series.csv: write failed", o->dir);
     o->series_rows++;
@@ -255,6 +341,9 @@ int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output
         rc = cm_fail(err, CM_ERR_IO, "%s: cannot reopen the grain frames to resume", path);
         goto done;
     }
+    /* A run with shaped grains wrote their hulls once (and frames list their
+     * orientation in the XDMF): not again after resuming. */
+    o->shapes_written = o->shaped = H5Lexists(o->h5, "shapes", H5P_DEFAULT) > 0;
     /* Frames past the checkpoint go; the kept ones are listed again. */
     for (long k = frames;; k++) {
         char name[64];

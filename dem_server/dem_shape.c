@@ -139,6 +139,8 @@ static int poly_build(const dem_shape_def *def, dem_shape *s, cm_error *err)
     int nf = 0;
     int on_hull[DEM_SHAPE_MAX_VERTS] = {0};
     int edges[3 * DEM_SHAPE_MAX_VERTS][2], ne = 0;
+    int face_first[MAXF + 1], face_vert[6 * DEM_SHAPE_MAX_VERTS], nfv = 0;
+    face_first[0] = 0;
     double vol = 0.0, C[9] = {0};
     vec3 m1 = v3(0, 0, 0);
     for (int i = 0; i < n; i++)
@@ -190,6 +192,11 @@ static int poly_build(const dem_shape_def *def, dem_shape *s, cm_error *err)
                         int ti = fv[b];
                         fv[b] = fv[b - 1], fv[b - 1] = ti;
                     }
+                if (nfv + nv > 6 * DEM_SHAPE_MAX_VERTS)
+                    return cm_fail(err, CM_ERR_RANGE, "polyhedron: more than %d face corners", 6 * DEM_SHAPE_MAX_VERTS);
+                for (int a = 0; a < nv; a++)
+                    face_vert[nfv++] = fv[a];
+                face_first[nf + 1] = nfv;
                 for (int a = 0; a < nv; a++) { /* the face's boundary edges, each once */
                     int e0 = fv[a], e1 = fv[(a + 1) % nv], dupe = 0;
                     if (e0 > e1) {
@@ -249,6 +256,12 @@ static int poly_build(const dem_shape_def *def, dem_shape *s, cm_error *err)
     for (int q = 0; q < ne; q++)
         s->e[q][0] = newidx[edges[q][0]], s->e[q][1] = newidx[edges[q][1]];
     s->n_faces = nf;
+    memcpy(s->face_first, face_first, (size_t)(nf + 1) * sizeof *face_first);
+    for (int q = 0; q < nfv; q++)
+        s->face_vert[q] = (unsigned char)newidx[face_vert[q]];
+    for (int f = 0; f < nf; f++)
+        for (int q = face_first[f]; q < face_first[f + 1]; q++)
+            s->face_mask[f] |= (uint64_t)1 << s->face_vert[q];
     for (int f = 0; f < nf; f++) {
         double nw[3] = {fn[f].x, fn[f].y, fn[f].z}, nb[3];
         mat_tvec(V, nw, nb);
@@ -776,6 +789,13 @@ int dem_shaped_pair(dem_world *w, int i, int j, double *xi, double *fx, double *
     dem_grains *g = &w->g;
     double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
     double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
+    if (w->pose && g->shape[i] >= 0 && g->shape[j] >= 0 && w->shapes[g->shape[i]].type == DEM_SHAPE_POLYHEDRON &&
+        w->shapes[g->shape[j]].type == DEM_SHAPE_POLYHEDRON) {
+        if (d2 < rs * rs)
+            return dem_poly_pair(w, i, j, xi, fx, fy, fz, tx, ty, tz);
+        xi[0] = xi[1] = xi[2] = 0.0;
+        return 0;
+    }
     double L = fmax(g->r[i], g->r[j]), inv_l = 1.0 / L;
     double origin[3] = {g->x[j], g->y[j], g->z[j]};
     dem_body bi, bj;

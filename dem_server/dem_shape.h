@@ -17,9 +17,13 @@
 #ifndef DEM_SHAPE_H
 #define DEM_SHAPE_H
 
+#include <stdint.h>
+
 #include "dem.h"
 
 typedef struct dem_world dem_world;
+
+_Static_assert(DEM_SHAPE_MAX_VERTS <= 64, "dem_shape.face_mask holds one bit per vertex");
 
 typedef struct dem_shape {
     int type;                             /* enum dem_shape_type */
@@ -30,6 +34,12 @@ typedef struct dem_shape {
     int e[3 * DEM_SHAPE_MAX_VERTS][2];
     int n_faces;                          /* polyhedron hull planes: n . x <= d inside */
     double f[2 * DEM_SHAPE_MAX_VERTS][4]; /* (n, d), principal frame, m */
+    /* vertices of face k: face_vert[face_first[k] .. face_first[k + 1]),
+     * counter-clockwise about its outward normal (the overlap-volume contact
+     * clips them) */
+    int face_first[2 * DEM_SHAPE_MAX_VERTS + 1];
+    unsigned char face_vert[6 * DEM_SHAPE_MAX_VERTS];
+    uint64_t face_mask[2 * DEM_SHAPE_MAX_VERTS]; /* bit t: vertex t is a corner of face k */
     dem_shape_info info;
 } dem_shape;
 
@@ -112,6 +122,17 @@ int dem_shaped_pair(dem_world *w, int i, int j, double *xi, double *fx, double *
 /* shaped grain i against wall k (its bounding sphere already overlaps it):
  * force and torque added to out_f/out_t; returns 1 in contact */
 int dem_shaped_wall(dem_world *w, int i, int k, double *xi, double out_f[3], double out_t[3]);
+/* polyhedron pair (both hulls posed by dem_shaped_pose_update this step,
+ * bounding spheres overlapping): overlap-volume contact (dem_poly_contact.c) */
+int dem_poly_pair(dem_world *w, int i, int j, double *xi, double *fx, double *fy, double *fz, double *tx, double *ty,
+                  double *tz);
+/* overlap volume of polyhedral slots i, j at the last pose update, m^3 */
+double dem_poly_overlap_volume(const dem_world *w, int i, int j);
+/* per-grain world-frame hulls (rotation, vertices, face planes) of the
+ * polyhedral grains: allocated when the world is prepared (cap x stride),
+ * refreshed once per step before the narrow phase */
+int dem_shaped_pose_alloc(dem_world *w, cm_error *err);
+void dem_shaped_pose_update(dem_world *w);
 /* diagnostics: depth of slot i below the plane (p, n) (> 0: overlap), and
  * whether slots i, j overlap */
 double dem_shaped_plane_depth(const dem_world *w, int i, const double p[3], const double n[3]);

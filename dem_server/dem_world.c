@@ -157,6 +157,7 @@ void dem_world_destroy(dem_world **wp)
     free(g->inertia);
     free(g->angmom);
     free(w->shapes);
+    free(w->pose);
     free(w->grain_cell);
     free(w->cell_start);
     free(w->cell_items);
@@ -968,6 +969,8 @@ int dem_world_prepare(dem_world *w, cm_error *err)
         memset(g->wall_mask, 0, (size_t)g->cap * sizeof *g->wall_mask);
     }
     int rc = check_dt(w, err);
+    if (rc == CM_OK)
+        rc = dem_shaped_pose_alloc(w, err);
     if (rc)
         return rc;
     w->need_rebuild = 1;
@@ -1152,6 +1155,8 @@ int dem_step_grains(dem_world *w, cm_error *err)
     int contacts = 0;
     const int np = w->n_active_pairs;
     const int shaped = w->n_shaped > 0;
+    if (shaped)
+        dem_shaped_pose_update(w);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
@@ -1330,8 +1335,7 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     s->contacts_gw = w->contacts_gw;
     s->contacts_gs = w->surf ? w->surf->tot.contacts : 0;
     /* Grain–surface overlaps of the last surface step (the tire's). */
-    if (w->surf)
-        s->max_overlap = fmax(s->max_overlap, w->surf->tot.max_overlap);
+    s->max_overlap_surface = w->surf ? w->surf->tot.max_overlap : 0.0;
     s->profile = w->prof;
 }
 

@@ -85,6 +85,8 @@ struct dem_world {
     dem_shape *shapes;  /* DEM_MAX_SHAPES, allocated by the first dem_shape_add */
     int n_shapes;
     int n_shaped;       /* shaped grains in the world; 0 = every loop takes the sphere path */
+    double *pose;       /* polyhedral grains' world-frame hulls, pose_stride per slot (dem_shaped_pose_update) */
+    int pose_stride, pose_nv;
 
     int n_threads;
     dem_thread_buf *tb; /* n_threads entries */

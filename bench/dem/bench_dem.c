@@ -153,10 +153,18 @@ static int make_shapes_world(int threads, const char *dir, int n, int angular, d
 static int run_shapes(const char *dir, int threads, int steps, int n, cm_error *err)
 {
     double rate[2] = {0, 0};
+    /* DEM_BENCH_WARMUP: steps before timing (default 200; 0 for a short
+     * callgrind count of the steps alone) */
+    const char *wu = getenv("DEM_BENCH_WARMUP");
+    int warmup = wu ? atoi(wu) : 200;
+    /* DEM_BENCH_ONLY=spheres or angular: time that bed alone (a callgrind count of one kind) */
+    const char *only = getenv("DEM_BENCH_ONLY");
     for (int kind = 0; kind < 2; kind++) {
+        if (only && strcmp(only, kind ? "angular" : "spheres") != 0)
+            continue;
         dem_world *w = NULL;
         int rc = make_shapes_world(threads, dir, n, kind, &w, err);
-        for (int k = 0; k < 200 && rc == CM_OK; k++)
+        for (int k = 0; k < warmup && rc == CM_OK; k++)
             rc = dem_step(w, err);
         double t0 = cm_now();
         for (int k = 0; k < steps && rc == CM_OK; k++)

@@ -390,12 +390,13 @@ static int stopped_by_guard(const char *scene, const char *tag, const char *cons
 }
 
 /* A grain 20 times faster than the plate scene's: its Hertz overlap would
- * reach ~40 % of the radius; the DEM side stops at coupling.max_overlap. */
+ * reach ~40 % of the radius; the DEM side stops at a grain–surface limit of 20 %. */
 static int guard_grain_overlap(void)
 {
-    const char *extra[] = {"--fem", PLATE_PEER_PATH, "--set", "dem.grains.[0].velocity=[0.0, 0.0, -20.0]", NULL};
-    return stopped_by_guard(SCENES "impact_plate.cfg", "overlap", extra, "dem", "grain overlap reached",
-                            "coupling.max_overlap");
+    const char *extra[] = {"--fem", PLATE_PEER_PATH, "--set", "dem.grains.[0].velocity=[0.0, 0.0, -20.0]",
+                           "--set", "coupling.max_surface_overlap=0.2", NULL};
+    return stopped_by_guard(SCENES "impact_plate.cfg", "overlap", extra, "dem", "pressed into the tire",
+                            "coupling.max_surface_overlap");
 }
 
 /* A DEM step 30 times its limit (allowed) with the overlap guard off and the

@@ -85,6 +85,11 @@ static inline vec3 dem_hm_force(const dem_pair_coef *c, vec3 n, double delta, do
     return v3_add(v3_scale(n, f_n), ft);
 }
 
+/* The Mindlin spring of dem_hm_force alone, for a given normal force fn and
+ * tangential stiffness st (shaped and polyhedral contacts); xi updated. */
+vec3 dem_mindlin_tangential(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn, double dt,
+                            double xi[3]);
+
 /* Constant-torque rolling resistance on i: -μ_r R F_n ω_rel/|ω_rel|, limited
  * so that it cannot reverse ω_rel within one step (i_eff: effective moment of
  * inertia of the pair, kg m²). */

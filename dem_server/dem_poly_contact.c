@@ -381,30 +381,6 @@ static void clip_faces(const posed_hull *a, const posed_hull *b, const plane_set
     }
 }
 
-/* Mindlin spring as in dem_hm_force, for a given normal force (dem_shape.c
- * has the same for the walls). */
-static vec3 spring_force(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn, double dt,
-                         double xi[3])
-{
-    vec3 vt = v3_sub(vrel, v3_scale(n, v3_dot(vrel, n)));
-    vec3 sp = v3_load(xi);
-    double s2 = v3_norm2(sp);
-    if (s2 > 0.0) {
-        vec3 pr = v3_sub(sp, v3_scale(n, v3_dot(sp, n)));
-        double p2 = v3_norm2(pr);
-        sp = p2 > 0.0 ? v3_scale(pr, sqrt(s2 / p2)) : pr;
-    }
-    sp = v3_axpy(dt, vt, sp);
-    vec3 ft = v3_sub(v3_scale(sp, -st), v3_scale(vt, c->gamma_t * sqrt(st * m)));
-    double ft2 = v3_norm2(ft), fmax = c->mu * fn;
-    if (ft2 > fmax * fmax) {
-        ft = v3_scale(ft, ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0);
-        sp = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
-    }
-    v3_store(xi, sp);
-    return ft;
-}
-
 /* k of W = k V² / 2: two flat faces in contact are a linear spring
  * F = k A² δ, the flat-punch stiffness 2 E* a (Johnson, Contact Mechanics
  * §5.2) for a face of area A = π a² with a = R* / 2, about a face's
@@ -467,7 +443,7 @@ int dem_poly_pair(dem_world *w, int i, int j, double *xi, double *fx, double *fy
     if (fe + fd < 0.0) /* no tension */
         fd = -fe;
     double fn = fe + fd;
-    vec3 ft = spring_force(cf, n, vrel, 8.0 * cf->G * sqrt(area / M_PI), m, fn, w->def.dt, xi);
+    vec3 ft = dem_mindlin_tangential(cf, n, vrel, 8.0 * cf->G * sqrt(area / M_PI), m, fn, w->def.dt, xi);
     vec3 Fp = v3_axpy(fd, n, ft); /* the part acting at p */
     vec3 F = v3_add(Fe, Fp);
     Ti = v3_add(Ti, v3_cross(di, Fp));

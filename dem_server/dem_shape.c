@@ -873,31 +873,6 @@ int dem_shaped_pair_touch(const dem_world *w, int i, int j)
     return dem_body_penetration(&bj, &bi, 0, &depth, n, pc) == 1;
 }
 
-/* Mindlin tangential spring of dem_hm_force (same rules: spring rotated
- * into the tangent plane, dashpot gamma_t sqrt(S_t m), Coulomb cap with the
- * spring rescaled on sliding), for a given total normal force. */
-static vec3 tangential_force(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn, double dt,
-                             double xi[3])
-{
-    vec3 vt = v3_sub(vrel, v3_scale(n, v3_dot(vrel, n)));
-    vec3 sp = v3_load(xi);
-    double s2 = v3_norm2(sp);
-    if (s2 > 0.0) {
-        vec3 pr = v3_sub(sp, v3_scale(n, v3_dot(sp, n)));
-        double p2 = v3_norm2(pr);
-        sp = p2 > 0.0 ? v3_scale(pr, sqrt(s2 / p2)) : pr;
-    }
-    sp = v3_axpy(dt, vt, sp);
-    vec3 ft = v3_sub(v3_scale(sp, -st), v3_scale(vt, c->gamma_t * sqrt(st * m)));
-    double ft2 = v3_norm2(ft), fmax = c->mu * fn;
-    if (ft2 > fmax * fmax) {
-        ft = v3_scale(ft, ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0);
-        sp = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
-    }
-    v3_store(xi, sp);
-    return ft;
-}
-
 /* Shaped grain against a plane: closed form, no libccd.
  * Ellipsoid: the support point in -n is the deepest point; one Hertz
  * contact with the local radius of curvature.
@@ -973,7 +948,7 @@ int dem_shaped_wall(dem_world *w, int i, int k, double *xi, double out_f[3], dou
     }
     vec3 lever = fn_tot > 0.0 ? v3_scale(pc, 1.0 / fn_tot) : v3_scale(nrm, -v3_dot(v3_sub(c, wp), nrm));
     vec3 vrel = v3_add(vi, v3_cross(wi, lever));
-    vec3 ft = tangential_force(cf, nrm, vrel, 8.0 * cf->G * a_sum, m, fn_tot, w->def.dt, xi);
+    vec3 ft = dem_mindlin_tangential(cf, nrm, vrel, 8.0 * cf->G * a_sum, m, fn_tot, w->def.dt, xi);
     vec3 F = v3_axpy(fn_tot, nrm, ft);
     T = v3_add(T, v3_cross(lever, ft));
     T = v3_add(T, dem_rolling_torque(cf, Rc, fn_tot, wi, 1.0 / g->inv_i[i], w->def.dt));

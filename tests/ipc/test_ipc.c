@@ -424,21 +424,11 @@ static int out_of_order_frame_refused(void)
 {
     char shm[128];
     unique_name(shm, sizeof shm, "order");
-    ipc_create_def def = ipc_default_create_def();
-    def.n_nodes = 10;
-    def.n_tris = 4;
-    ipc_channel *fem;
     char err[512];
-    ENSURE(ipc_create(shm, &def, &fem, err, sizeof err) == IPC_OK);
-    double *x = ipc_surface_nodes(fem);
-    uint32_t *t = ipc_surface_tris(fem);
-    for (int i = 0; i < 30; i++)
-        x[i] = i;
-    for (int k = 0; k < 4; k++) {
-        t[3 * k] = (uint32_t)k;
-        t[3 * k + 1] = (uint32_t)k + 1;
-        t[3 * k + 2] = (uint32_t)k + 2;
-    }
+    /* Fork before the segment exists: ipc_create starts the heartbeat
+     * thread, and a child forked from a threaded parent can inherit an
+     * allocator lock held by that thread (it hung under AddressSanitizer).
+     * The child's attach waits for the segment. */
     pid_t child = fork();
     if (child == 0) {
         /* DEM side in a child process: send frame 0, then a frame claiming seq 5. */
@@ -466,6 +456,21 @@ static int out_of_order_frame_refused(void)
         sleep_ms(500);
         ipc_close(&dem, IPC_OK);
         _exit(0);
+    }
+    ENSURE(child > 0);
+    ipc_create_def def = ipc_default_create_def();
+    def.n_nodes = 10;
+    def.n_tris = 4;
+    ipc_channel *fem;
+    ENSURE(ipc_create(shm, &def, &fem, err, sizeof err) == IPC_OK);
+    double *x = ipc_surface_nodes(fem);
+    uint32_t *t = ipc_surface_tris(fem);
+    for (int i = 0; i < 30; i++)
+        x[i] = i;
+    for (int k = 0; k < 4; k++) {
+        t[3 * k] = (uint32_t)k;
+        t[3 * k + 1] = (uint32_t)k + 1;
+        t[3 * k + 2] = (uint32_t)k + 2;
     }
     int rc = ipc_accept(fem);
     ENSURE_MSG(rc == IPC_OK, "%s", ipc_error(fem));

@@ -880,6 +880,28 @@ int cm_h5_step_end(cm_h5 *f, cm_error *err)
 
 /* ---- time series -------------------------------------------------------------- */
 
+/* The common ending of creating and reopening a series: flushed and added
+ * to the file's list, or, after a failure, released. */
+static int series_adopt(cm_h5 *f, cm_h5_series *s, int rc, cm_h5_series **out, cm_error *err)
+{
+    if (rc == CM_OK)
+        rc = cm_h5_flush(f, err);
+    if (rc != CM_OK) {
+        cm_csv_close(&s->csv, NULL);
+        if (s->dset >= 0)
+            H5Dclose(s->dset);
+        if (s->memtype >= 0)
+            H5Tclose(s->memtype);
+        free(s->path);
+        free(s);
+        return rc;
+    }
+    s->next = f->series;
+    f->series = s;
+    *out = s;
+    return CM_OK;
+}
+
 int cm_h5_series_create(cm_h5 *f, const char *path, const char *const *columns, int ncols, const char *csv_path,
                         cm_h5_series **out, cm_error *err)
 {
@@ -934,22 +956,7 @@ int cm_h5_series_create(cm_h5 *f, const char *path, const char *const *columns, 
         H5Tclose(ftype);
     if (rc == CM_OK && csv_path)
         rc = cm_csv_create(csv_path, columns, ncols, &s->csv, err);
-    if (rc == CM_OK)
-        rc = cm_h5_flush(f, err);
-    if (rc != CM_OK) {
-        cm_csv_close(&s->csv, NULL);
-        if (s->dset >= 0)
-            H5Dclose(s->dset);
-        if (s->memtype >= 0)
-            H5Tclose(s->memtype);
-        free(s->path);
-        free(s);
-        return rc;
-    }
-    s->next = f->series;
-    f->series = s;
-    *out = s;
-    return CM_OK;
+    return series_adopt(f, s, rc, out, err);
 }
 
 int cm_h5_series_append(cm_h5_series *s, const double *row, cm_error *err)
@@ -1224,22 +1231,8 @@ int cm_h5_series_reopen(cm_h5 *f, const char *path, const char *const *columns, 
     if (rc == CM_OK && csv_path)
         rc = cm_csv_reopen(csv_path, ncols, rows, &s->csv, err);
     if (rc == CM_OK)
-        rc = cm_h5_flush(f, err);
-    if (rc != CM_OK) {
-        cm_csv_close(&s->csv, NULL);
-        if (s->dset >= 0)
-            H5Dclose(s->dset);
-        if (s->memtype >= 0)
-            H5Tclose(s->memtype);
-        free(s->path);
-        free(s);
-        return rc;
-    }
-    s->rows = rows;
-    s->next = f->series;
-    f->series = s;
-    *out = s;
-    return CM_OK;
+        s->rows = rows;
+    return series_adopt(f, s, rc, out, err);
 }
 
 /* ---- raw typed arrays ---------------------------------------------------------- */

@@ -84,30 +84,3 @@ void dem_pair_coef_make(const dem_material *a, const dem_material *b, dem_pair_c
     c->gamma_n = c->gamma_t = 0.0; /* set by the caller: dem_damping_for_restitution() */
     c->st_sn = sqrt(4.0 * c->G / c->E);
 }
-
-/* Mindlin tangential spring of dem_hm_force (same rules: spring rotated
- * into the tangent plane, dashpot gamma_t sqrt(S_t m), Coulomb cap with the
- * spring rescaled on sliding), for a given total normal force and tangential
- * stiffness st: the shaped and polyhedral contacts, whose normal force is not
- * Hertz's. */
-vec3 dem_mindlin_tangential(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn, double dt,
-                            double xi[3])
-{
-    vec3 vt = v3_sub(vrel, v3_scale(n, v3_dot(vrel, n)));
-    vec3 sp = v3_load(xi);
-    double s2 = v3_norm2(sp);
-    if (s2 > 0.0) {
-        vec3 pr = v3_sub(sp, v3_scale(n, v3_dot(sp, n)));
-        double p2 = v3_norm2(pr);
-        sp = p2 > 0.0 ? v3_scale(pr, sqrt(s2 / p2)) : pr;
-    }
-    sp = v3_axpy(dt, vt, sp);
-    vec3 ft = v3_sub(v3_scale(sp, -st), v3_scale(vt, c->gamma_t * sqrt(st * m)));
-    double ft2 = v3_norm2(ft), fmax = c->mu * fn;
-    if (ft2 > fmax * fmax) {
-        ft = v3_scale(ft, ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0);
-        sp = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
-    }
-    v3_store(xi, sp);
-    return ft;
-}

@@ -48,6 +48,31 @@ double dem_restitution_achieved(double gamma_n);
  * xi = -(F_t + c_t v_t)/S_t; when the dashpot alone exceeds the cap (early in
  * a fast oblique impact) that spring points the wrong way and the friction
  * force changes sign: the oblique-impact test loses 17 % of the impulse. */
+/* The Mindlin spring of the rules below, shared by every contact model:
+ * xi rotated into the tangent plane of n (magnitude kept), incremented by
+ * vt dt, F_t = -st xi - ct vt capped at fmax, the spring rescaled on sliding. */
+static inline vec3 dem_mindlin_spring(vec3 n, vec3 vt, double st, double ct, double fmax, double dt, double xi[3])
+{
+    vec3 s = v3_load(xi);
+    double s2 = v3_norm2(s);
+    if (s2 > 0.0) {
+        /* rotate the stored spring into the current tangent plane */
+        vec3 sp = v3_sub(s, v3_scale(n, v3_dot(s, n)));
+        double sp2 = v3_norm2(sp);
+        s = sp2 > 0.0 ? v3_scale(sp, sqrt(s2 / sp2)) : sp;
+    }
+    s = v3_axpy(dt, vt, s);
+    vec3 ft = v3_sub(v3_scale(s, -st), v3_scale(vt, ct));
+    double ft2 = v3_norm2(ft);
+    if (ft2 > fmax * fmax) {
+        double k = ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0;
+        ft = v3_scale(ft, k);
+        s = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
+    }
+    v3_store(xi, s);
+    return ft;
+}
+
 static inline vec3 dem_hm_force(const dem_pair_coef *c, vec3 n, double delta, double R, double m, vec3 vrel,
                                 double dt, double xi[3], double *fn)
 {
@@ -63,32 +88,20 @@ static inline vec3 dem_hm_force(const dem_pair_coef *c, vec3 n, double delta, do
     *fn = f_n;
 
     vec3 vt = v3_sub(vrel, v3_scale(n, vn)); /* eq. 14 */
-    vec3 s = v3_load(xi);
-    double s2 = v3_norm2(s);
-    if (s2 > 0.0) {
-        /* rotate the stored spring into the current tangent plane */
-        vec3 sp = v3_sub(s, v3_scale(n, v3_dot(s, n)));
-        double sp2 = v3_norm2(sp);
-        s = sp2 > 0.0 ? v3_scale(sp, sqrt(s2 / sp2)) : sp;
-    }
-    s = v3_axpy(dt, vt, s);
     double ct = c->gamma_t * c->st_sn * sq; /* gamma_t sqrt(S_t m) */
-    vec3 ft = v3_sub(v3_scale(s, -st), v3_scale(vt, ct));
-    double ft2 = v3_norm2(ft);
-    double fmax = c->mu * f_n;
-    if (ft2 > fmax * fmax) {
-        double k = ft2 > 0.0 ? fmax / sqrt(ft2) : 0.0;
-        ft = v3_scale(ft, k);
-        s = st > 0.0 ? v3_scale(ft, -1.0 / st) : v3(0, 0, 0);
-    }
-    v3_store(xi, s);
+    vec3 ft = dem_mindlin_spring(n, vt, st, ct, c->mu * f_n, dt, xi);
     return v3_add(v3_scale(n, f_n), ft);
 }
 
-/* The Mindlin spring of dem_hm_force alone, for a given normal force fn and
- * tangential stiffness st (shaped and polyhedral contacts); xi updated. */
-vec3 dem_mindlin_tangential(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn, double dt,
-                            double xi[3]);
+/* The tangential force of dem_hm_force alone, for a given normal force fn
+ * and tangential stiffness st (shaped and polyhedral contacts, whose normal
+ * force is not Hertz's); xi updated. */
+static inline vec3 dem_mindlin_tangential(const dem_pair_coef *c, vec3 n, vec3 vrel, double st, double m, double fn,
+                                          double dt, double xi[3])
+{
+    vec3 vt = v3_sub(vrel, v3_scale(n, v3_dot(vrel, n)));
+    return dem_mindlin_spring(n, vt, st, c->gamma_t * sqrt(st * m), c->mu * fn, dt, xi);
+}
 
 /* Constant-torque rolling resistance on i: -μ_r R F_n ω_rel/|ω_rel|, limited
  * so that it cannot reverse ω_rel within one step (i_eff: effective moment of

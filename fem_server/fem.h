@@ -34,6 +34,10 @@ typedef enum fem_integrator {
     FEM_INTEGRATOR_NEWMARK = 1,  /* average acceleration, unconditionally stable */
     FEM_INTEGRATOR_RIGID = 2     /* no deformation: u = 0 */
 } fem_integrator;
+
+/* The elastic law: eq. 29, or compressible Neo-Hookean with the same
+ * small-strain E and nu (fem_material.h; explicit integrator only). */
+typedef enum fem_material_model { FEM_MATERIAL_LINEAR = 0, FEM_MATERIAL_NEO_HOOKEAN = 1 } fem_material_model;
 typedef enum fem_linear_solver { FEM_LINEAR_CHOLMOD = 0, FEM_LINEAR_CG = 1 } fem_linear_solver;
 
 /* Parametric 165/65 R13 tire. Axle along y, rolling in the x-z plane; the
@@ -71,6 +75,7 @@ typedef struct fem_config {
     double rho;              /* kg/m^3: 1100 */
     double rayleigh_alpha;   /* 1/s, C = alpha M + beta K: 0 */
     double rayleigh_beta;    /* s: 0 */
+    fem_material_model material_model; /* fem.material.model: linear (default) or neo_hookean (explicit) */
     fem_integrator integrator;
     double dt;               /* s, largest FEM sub-step */
     bool allow_unstable;     /* explicit: accept dt above the computed limit */

@@ -20,7 +20,10 @@
  *     cells = [20, 2, 2];
  *   };
  *   material = { E = 20.0e6; nu = 0.45; rho = 1100.0;     # Pa, -, kg/m^3 (table 3)
- *                rayleigh_alpha = 0.0; rayleigh_beta = 0.0; };  # 1/s, s (optional)
+ *                rayleigh_alpha = 0.0; rayleigh_beta = 0.0;     # 1/s, s (optional)
+ *                model = "linear" | "neo_hookean"; };  # optional, default linear (eq. 29);
+ *                # neo_hookean: compressible Neo-Hookean with the same small-strain E and nu,
+ *                # explicit integrator only (fem_material.h); the static start stays linear
  *   integrator = "explicit" | "newmark" | "rigid";
  *   dt = 1.0e-5;                # s, largest sub-step
  *   allow_unstable = false;     # explicit: accept dt above the computed limit
@@ -129,6 +132,12 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     TRY(cm_scene_double_opt(s, "fem.material.rayleigh_beta", 0.0, 1.0, 0.0, &c->rayleigh_beta, err));
     TRY(cm_scene_choice(s, "fem.integrator", integrators, &k, err));
     c->integrator = (fem_integrator)k;
+    static const char *const models[] = {"linear", "neo_hookean", NULL};
+    TRY(cm_scene_choice_opt(s, "fem.material.model", models, FEM_MATERIAL_LINEAR, &k, err));
+    c->material_model = (fem_material_model)k;
+    if (c->material_model == FEM_MATERIAL_NEO_HOOKEAN && c->integrator == FEM_INTEGRATOR_NEWMARK)
+        return cm_fail(err, CM_ERR_RANGE, "%s: fem.material.model = \"neo_hookean\" needs fem.integrator = "
+                       "\"explicit\": Newmark's linear solve cannot use it yet", cm_scene_path(s));
     TRY(cm_scene_double(s, "fem.dt", 1e-12, 1.0, &c->dt, err));
     TRY(cm_scene_bool_opt(s, "fem.allow_unstable", false, &c->allow_unstable, err));
     TRY(cm_scene_choice_opt(s, "fem.static_solver", solvers, FEM_LINEAR_CHOLMOD, &k, err));

@@ -139,6 +139,13 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     rc = fem_solver_constrain_rim(m->s, &m->mesh, err);
     if (rc)
         goto fail;
+    if (cfg->material_model == FEM_MATERIAL_NEO_HOOKEAN) {
+        rc = fem_solver_use_neo_hookean(m->s, &m->mesh, err);
+        if (rc)
+            goto fail;
+        cm_log_info("fem: Neo-Hookean rubber (lambda %.4g Pa, mu %.4g Pa) in the explicit steps; the static start "
+                    "and the stability estimate use the small-strain stiffness", m->s->lambda, m->s->mu);
+    }
     m->b_pressure = calloc((size_t)m->s->n_dof, sizeof(double));
     m->u_prev = calloc((size_t)m->s->n_dof, sizeof(double));
     if (!m->b_pressure || !m->u_prev) {

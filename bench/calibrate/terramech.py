@@ -64,13 +64,23 @@ def bekker_fit(curves, refine=20):
     bs = np.concatenate([np.full(len(z), float(b)) for b, z, _ in curves])
     zs = np.concatenate([np.asarray(z, float) for _, z, _ in curves])
     ps = np.concatenate([np.asarray(p, float) for _, _, p in curves])
+    def ssr(y):
+        return float(np.sum((ps - (y[0] / bs + y[1]) * np.power(zs, y[2])) ** 2))
+
     for _ in range(refine):
         zn = np.power(zs, x[2])
         model = (x[0] / bs + x[1]) * zn
         J = np.column_stack([zn / bs, zn, model * np.log(zs)])
         step = np.linalg.lstsq(J, ps - model, rcond=None)[0]
-        x = x + step
-        if np.all(np.abs(step) <= 1e-12 * np.maximum(np.abs(x), 1.0)):
+        # damped: halve the step until the residual falls (noisy measured
+        # curves can send a full Gauss-Newton step far off)
+        s0, t = ssr(x), 1.0
+        while t > 1e-6 and not ssr(x + t * step) < s0:
+            t *= 0.5
+        if not t > 1e-6:
+            break
+        x = x + t * step
+        if np.all(np.abs(t * step) <= 1e-12 * np.maximum(np.abs(x), 1.0)):
             break
     model = (x[0] / bs + x[1]) * np.power(zs, x[2])
     return {"k_c": float(x[0]), "k_phi": float(x[1]), "n": float(x[2]),

@@ -13,6 +13,7 @@
  *   fem_solve_static(model, &err);           K u0 = b0 (sect. 3.3), start state
  *   loop: fem_interface_state(...)           -> DEM
  *         fem_advance(model, f_iface, dt_exchange, &err)   <- DEM forces
+ *         fem_output_due(model, &err)       snapshot every fem.output.every advances
  *   fem_destroy(&model);
  *
  * Units: SI throughout (m, s, kg, N, Pa). Interface arrays are indexed by the
@@ -101,24 +102,25 @@ void fem_destroy(fem_model **m);
 int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err);
 
 /* Solves K u0 = b0 (pressure + gravity, no DEM forces) with the configured
- * solver and makes it the start state (v = 0). */
+ * solver and makes it the start state (v = 0). Without a load (b0 = 0 on
+ * the free dofs) u0 is the prescribed displacement and K is not factorized. */
 int fem_solve_static(fem_model *m, cm_error *err);
 
 /* ---- Interface to the DEM ---------------------------------------------- */
 
-int fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris);
+void fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris);
 /* Reference positions (rim frame, undeformed) of the interface nodes,
  * triangles as index triples into that list (outward, counter-clockwise
  * seen from outside), unit outward normals per triangle. Any output may be
  * NULL. Sizes: x 3*n_nodes, tris 3*n_tris, normals 3*n_tris. */
-int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
+void fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
 /* Lumped mass [kg] of each interface node (n_nodes entries); 0 for a fixed
  * (rim) node. The DEM uses it for the two-body contact mass. */
-int fem_interface_masses(const fem_model *m, double *mass);
+void fem_interface_masses(const fem_model *m, double *mass);
 /* Mesh node ids of the interface nodes (n_nodes entries). */
-int fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
+void fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
 /* World-frame positions and velocities now (either may be NULL). */
-int fem_interface_state(const fem_model *m, double *x, double *v);
+void fem_interface_state(const fem_model *m, double *x, double *v);
 
 /* ---- Wheel (rigid) motion ---------------------------------------------- */
 
@@ -138,7 +140,8 @@ void fem_get_wheel(const fem_model *m, fem_wheel *w);
 
 /* Advances by `interval` [s] in n = ceil(interval / dt) equal sub-steps,
  * holding the external interface forces f_iface (3 per interface node,
- * world frame, N; NULL = none) constant. */
+ * world frame, N; NULL = none) constant. Runs the energy and element guards
+ * (fem.check_every); writes no files (fem_output_due does). */
 int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *err);
 
 double fem_time(const fem_model *m);
@@ -183,5 +186,9 @@ const double *fem_displacement(const fem_model *m);
 /* Writes a snapshot (deformed mesh, u, strain, stress incl. e22 and e33)
  * now, whatever output_every says. No-op without an output folder. */
 int fem_write_snapshot(fem_model *m, cm_error *err);
+/* Writes a snapshot when the advances so far are a multiple of
+ * fem.output.every and none was written at this advance yet: call it after
+ * each fem_advance (fem_server's snapshot stage does). */
+int fem_output_due(fem_model *m, cm_error *err);
 
 #endif

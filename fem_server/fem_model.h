@@ -23,6 +23,7 @@ struct fem_model {
     bool have_stab;
     bool static_done;
     long advances;
+    long output_advance;    /* advances at the last snapshot fem_output_due wrote (0: none) */
     double max_substep;     /* s, last sub-step used */
     double size;            /* m, bounding-box diagonal of the mesh */
     /* Energy guard: E = E_kin + E_el - b_pressure.u (pressure is conservative)

@@ -306,16 +306,25 @@ static void print_progress(fem_coupled *c, const exchange *x, double th_minus_tr
     c->last_progress = now;
     double t = x->time + c->interval, elapsed = now - c->loop_t0;
     double rate = elapsed > 0 ? (double)(c->n + 1 - c->n_first) / elapsed : 0; /* exchanges per s */
-    /* What ends the run: the travel distance once travelling (the wheel's
-     * speed gives the exchanges left), else end_time. */
-    double remaining = (c->run->end_time - t) / c->interval;
-    if (c->ds.phase == DRIVE_TRAVEL && c->ds.velocity[0] > 0)
+    /* What ends the run: the travel distance while travelling (the wheel's
+     * speed gives the exchanges left, unless end_time comes first); while
+     * sinking, the time to reach the load is unknown ("-"); a fixed wheel
+     * runs to end_time. */
+    double by_time = (c->run->end_time - t) / c->interval, remaining = -1;
+    const char *by = "end_time";
+    if (c->ds.phase == DRIVE_TRAVEL && c->ds.velocity[0] > 0) {
         remaining = (c->drive->travel_distance - c->ds.travelled) / c->ds.velocity[0] / c->interval;
-    char eta[32];
+        by = "travel";
+    } else if (c->ds.phase == DRIVE_FIXED) {
+        remaining = by_time;
+    }
+    if (remaining >= 0 && by_time < remaining)
+        remaining = by_time, by = "end_time";
+    char eta[48];
     if (rate > 0 && c->n + 1 - c->n_first >= 2 && remaining >= 0)
-        snprintf(eta, sizeof eta, "%5.0f s", remaining / rate);
+        snprintf(eta, sizeof eta, "%5.0f s (%s)", remaining / rate, by);
     else
-        snprintf(eta, sizeof eta, "%5s", "-"); /* no rate yet */
+        snprintf(eta, sizeof eta, "%5s", "-"); /* no rate yet, or nothing to base it on */
     static const char *const phase_names[] = {"sinkage", "travel", "done", "fixed"};
     cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm  slip %5.1f %%",
                 phase_names[c->ds.phase], t, rate, eta, x->info[IPC_INFO_FORCE_Z], th_minus_tr, 1e3 * sinkage,

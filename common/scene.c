@@ -531,6 +531,16 @@ int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err)
     return CM_OK;
 }
 
+int cm_scene_print_config(const char *path, FILE *f, cm_error *err)
+{
+    cm_scene *s = NULL;
+    int rc = cm_scene_open(path, &s, err);
+    if (rc == CM_OK)
+        rc = cm_scene_write(s, f, err);
+    cm_scene_close(&s);
+    return rc;
+}
+
 int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err)
 {
     const char *eq = strchr(assignment, '=');

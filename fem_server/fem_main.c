@@ -170,15 +170,7 @@ static int run(const options *o)
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
     fem_config cfg = fem_config_default();
-    if ((rc = cm_scene_open(o->scene, &scene, &err)))
-        goto fail;
-    if (o->print_config) { /* the scene as resolved: file + --set, libconfig syntax */
-        if ((rc = cm_scene_write(scene, stdout, &err)))
-            goto fail;
-        exit_code = 0;
-        goto cleanup;
-    }
-    if ((rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
+    if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
         (rc = fem_config_read(scene, &cfg, &err)))
         goto fail;
     cm_scene_mark_known(scene, "dem");
@@ -410,6 +402,13 @@ int main(int argc, char **argv)
     }
     if (!o.scene || (!o.shm && !o.export_mesh && !o.print_config))
         return usage();
+    if (o.print_config) { /* the scene as resolved: file + --set, libconfig syntax */
+        cm_error err = {0};
+        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+            return 0;
+        fprintf(stderr, "fem_server: %s\n", err.msg);
+        return 1;
+    }
     cm_log_set_tag("fem");
     cm_h5_library_init();
     struct sigaction sa;
@@ -419,7 +418,7 @@ int main(int argc, char **argv)
     sigaction(SIGTERM, &sa, NULL);
     sa.sa_handler = on_alarm;
     sigaction(SIGALRM, &sa, NULL);
-    if (!o.export_mesh && !o.print_config && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
+    if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;
     }

@@ -1,0 +1,123 @@
+/* fem_server's exchange guards (fem_exchange.c), issue 16 item 0: the
+ * interface-work guard compares the two sides' work relative to the work
+ * itself, with a floor from the interface's energy scale.
+ *
+ * work_guard_relative: the guard's rule on numbers (no processes).
+ * tire_drift_stopped: tire_small with an exchange interval 12x too long
+ *   (coupling.dt 1.2e-4 s; fem.dt 2e-5 s sub-cycled) ran to the end with exit
+ *   0 before, the two sides' interface work 66 % apart (-1.34 J DEM, -0.46 J
+ *   FEM: never above the old absolute 1 J gap); it must stop, naming the
+ *   cause and the key to change.
+ * tire_moderate_interval_passes: the same at coupling.dt 5e-5 s, where the
+ *   two sides agree within 0.13 %: the guard must not fire.
+ * The runs go through the launcher and wait for it with system(): no
+ * polling, no sleeps. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "fem_exchange.h"
+#include "test.h"
+
+#if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR)
+#error "DEMFEM_SOURCE_DIR and DEMFEM_BUILD_DIR must be defined"
+#endif
+
+static int work_guard_relative(void)
+{
+    cm_error err = {0};
+    /* Stable: a few per cent apart, whatever the size of the work. */
+    ENSURE(fem_check_interface_work(-0.385645, -0.385638, 0.09, 0.2, 1e-5, &err) == CM_OK);
+    ENSURE(fem_check_interface_work(-3.7e-6, -3.8e-6, 0.0, 0.05, 1e-5, &err) == CM_OK);
+    ENSURE(fem_check_interface_work(120.0, 110.0, 0.0, 1.0, 1e-5, &err) == CM_OK);
+    /* The small unstable case: 66 % apart, far below the old 1 J. */
+    ENSURE(fem_check_interface_work(-0.458, -1.337, 0.17, 0.21, 1.2e-4, &err) == CM_ERR_NUMERIC);
+    ENSURE_MSG(strstr(err.msg, "coupling unstable at t = 0.2100 s") && strstr(err.msg, "reduce coupling.dt") &&
+                   strstr(err.msg, "= 0.00012 s"),
+               "%s", err.msg);
+    /* The same relative gap on tiny works, just above the tolerance. */
+    ENSURE(fem_check_interface_work(1e-6, 1.5e-6, 0.0, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    /* Work passing through zero: the floor (the energy scale) holds it... */
+    ENSURE(fem_check_interface_work(1e-4, -1e-4, 0.08, 0.1, 1e-5, &err) == CM_OK);
+    /* ...but not a gap that is large against the floor too. */
+    ENSURE(fem_check_interface_work(0.03, -0.03, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    /* NaN never passes. */
+    ENSURE(fem_check_interface_work(NAN, 0.1, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    return 0;
+}
+
+/* Runs tire_small through the launcher with extra --set arguments; returns
+ * the launcher's exit status (-1: could not run) and leaves the log in log. */
+static int run_tire_small(const char *tag, const char *sets, char *log, size_t len)
+{
+    char out[256], cmd[2048];
+    snprintf(out, sizeof out, "/tmp/demfem-femguards-%d-%s", (int)getpid(), tag);
+    snprintf(log, len, "%s.log", out);
+    snprintf(cmd, sizeof cmd,
+             "DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR='%s' '%s/run' '%s/tests/coupling/scenes/tire_small.cfg' --out '%s' "
+             "%s > '%s' 2>&1",
+             DEMFEM_BUILD_DIR, DEMFEM_SOURCE_DIR, DEMFEM_SOURCE_DIR, out, sets, log);
+    int st = system(cmd);
+    char rm[400];
+    snprintf(rm, sizeof rm, "rm -rf '%s'", out);
+    if (system(rm) != 0)
+        fprintf(stderr, "could not remove %s\n", out);
+    return st == -1 || !WIFEXITED(st) ? -1 : WEXITSTATUS(st);
+}
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return NULL;
+    static char buf[1 << 17];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    return buf;
+}
+
+static int tire_drift_stopped(void)
+{
+    char log[300];
+    int status = run_tire_small("drift", "--set coupling.dt=1.2e-4 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
+                                log, sizeof log);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (status == 0 || !strstr(text, "coupling unstable"))
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(status != 0 && status != -1);
+    ENSURE(strstr(text, "[fem] error: coupling unstable at t = "));
+    ENSURE(strstr(text, "interface work seen by the FEM") && strstr(text, "reduce coupling.dt"));
+    ENSURE(strstr(text, "[dem] error: peer fem failed"));
+    ENSURE(!strstr(text, "traction over the steady part")); /* stopped, not finished */
+    unlink(log);
+    return 0;
+}
+
+static int tire_moderate_interval_passes(void)
+{
+    char log[300];
+    int status = run_tire_small("moderate", "--set coupling.dt=5e-5 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
+                                log, sizeof log);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (status != 0)
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(status == 0);
+    ENSURE(!strstr(text, "coupling unstable"));
+    ENSURE(strstr(text, "traction over the steady part"));
+    unlink(log);
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"work_guard_relative", work_guard_relative},
+    {"tire_drift_stopped", tire_drift_stopped},
+    {"tire_moderate_interval_passes", tire_moderate_interval_passes},
+};
+
+int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

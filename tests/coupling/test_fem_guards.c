@@ -10,12 +10,19 @@
  *   cause and the key to change.
  * tire_moderate_interval_passes: the same at coupling.dt 5e-5 s, where the
  *   two sides agree within 0.13 %: the guard must not fire.
- * The runs go through the launcher and wait for it with system(): no
- * polling, no sleeps. */
+ * peer_nan_force_named: fem_server against this test acting as the DEM side,
+ *   which sends one frame with a NaN nodal force: fem_server must stop with
+ *   the peer's bad data named (exchange, node, component), not report an
+ *   unstable tire.
+ * The runs go through the launcher and wait for it with system() or
+ * waitpid(): no polling, no sleeps. */
 #include <math.h>
+#include <fcntl.h>
+#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -114,10 +121,70 @@ static int tire_moderate_interval_passes(void)
     return 0;
 }
 
+extern char **environ;
+
+static int peer_nan_force_named(void)
+{
+    char name[64], out[256], log[300];
+    snprintf(name, sizeof name, "/demfem-femguards-%d-nan", (int)getpid());
+    snprintf(out, sizeof out, "/tmp/demfem-femguards-%d-nan", (int)getpid());
+    snprintf(log, sizeof log, "%s.log", out);
+    mkdir(out, 0755);
+    const char *argv[] = {DEMFEM_BUILD_DIR "/fem_server/fem_server", "--scene",
+                          DEMFEM_SOURCE_DIR "/tests/coupling/scenes/tire_small.cfg", "--shm", name, "--out", out, NULL};
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    pid_t pid;
+    ENSURE(posix_spawn(&pid, argv[0], &fa, NULL, (char *const *)argv, environ) == 0);
+    posix_spawn_file_actions_destroy(&fa);
+    /* The DEM side: attach (the library waits for the segment), one frame. */
+    ipc_attach_def def = ipc_default_attach_def();
+    def.dt = 1e-5;
+    def.exchange_every = 1;
+    def.connect_timeout = 120;
+    ipc_channel *ch = NULL;
+    char err[512];
+    int rc = ipc_attach(name, &def, &ch, err, sizeof err);
+    if (rc != IPC_OK)
+        fprintf(stderr, "attach: %s\n", err);
+    ENSURE(rc == IPC_OK);
+    ipc_frame_head *fr;
+    double *p;
+    ENSURE(ipc_send_begin(ch, &fr, &p) == IPC_OK);
+    uint32_t nn = ipc_surface_node_count(ch);
+    ENSURE(nn > 7);
+    memset(p, 0, ipc_send_len(ch) * sizeof *p);
+    fr->kind = IPC_FRAME_DATA;
+    fr->time = 0.0;
+    p[3 * 7 + 2] = NAN; /* node 7, z */
+    ENSURE(ipc_send_commit(ch) == IPC_OK);
+    const ipc_frame_head *in;
+    const double *f;
+    ENSURE(ipc_recv(ch, &in, &f) != IPC_OK); /* fem_server failed the channel */
+    ipc_close(&ch, IPC_OK);
+    int st;
+    ENSURE(waitpid(pid, &st, 0) == pid);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (!WIFEXITED(st) || WEXITSTATUS(st) != 1 || !strstr(text, "sent bad data"))
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    ENSURE(strstr(text, "error: dem_server sent bad data at exchange 0 (t = 0.000000 s): the force on interface "
+                        "node 7 (z) is nan"));
+    ENSURE(!strstr(text, "unstable"));
+    char rm[700];
+    snprintf(rm, sizeof rm, "rm -rf '%s' '%s'", out, log);
+    ENSURE(system(rm) == 0);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"work_guard_relative", work_guard_relative},
     {"tire_drift_stopped", tire_drift_stopped},
     {"tire_moderate_interval_passes", tire_moderate_interval_passes},
+    {"peer_nan_force_named", peer_nan_force_named},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

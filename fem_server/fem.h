@@ -61,6 +61,36 @@ typedef struct fem_tire_def {
 
 fem_tire_def fem_tire_def_default(void);
 
+/* Supports and loads by named set (fem_bc.c). A set is one of the mesh's
+ * named sets (rim: nodes; cavity, contact: boundary faces) or a plane of the
+ * mesh's bounding box (xmin ... zmax: the nodes and boundary faces on it). */
+typedef enum fem_set {
+    FEM_SET_RIM, FEM_SET_CAVITY, FEM_SET_CONTACT,
+    FEM_SET_XMIN, FEM_SET_XMAX, FEM_SET_YMIN, FEM_SET_YMAX, FEM_SET_ZMIN, FEM_SET_ZMAX,
+    FEM_SET_COUNT
+} fem_set;
+extern const char *const fem_set_names[FEM_SET_COUNT + 1]; /* NULL-terminated */
+
+enum { FEM_MAX_BC = 16 };
+/* Components fix[a] of every node of the set held at displacement value[a]
+ * (m, rim frame): all three = clamped, one = roller / symmetry plane. */
+typedef struct fem_support {
+    fem_set set;
+    bool fix[3];
+    double value[3];
+} fem_support;
+typedef enum fem_load_type {
+    FEM_LOAD_PRESSURE = 0, /* value[0] Pa, pushing into the body on the set's faces */
+    FEM_LOAD_TRACTION = 1, /* value Pa, a vector on the set's faces */
+    FEM_LOAD_FORCE = 2     /* value N, the total: faces as a uniform traction, else equal per node */
+} fem_load_type;
+typedef struct fem_load {
+    fem_set set;
+    fem_load_type type;
+    double value[3];
+} fem_load;
+typedef enum fem_analysis { FEM_ANALYSIS_STATIC = 0, FEM_ANALYSIS_DYNAMIC = 1 } fem_analysis;
+
 typedef struct fem_config {
     fem_mesh_type mesh;
     fem_tire_def tire;       /* mesh = tire */
@@ -85,6 +115,11 @@ typedef struct fem_config {
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
     int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
     double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
+    int n_supports;          /* 0: the rim set clamped (all three components at 0) */
+    fem_support supports[FEM_MAX_BC];
+    int n_loads;             /* dead loads besides pressure and gravity (rim frame) */
+    fem_load loads[FEM_MAX_BC];
+    fem_analysis analysis;   /* fem_server --fem-only: static solve, or from rest to run.end_time */
 } fem_config;
 
 fem_config fem_config_default(void);

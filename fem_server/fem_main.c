@@ -3,6 +3,7 @@
  *   fem_server --scene FILE --shm NAME [--out DIR]
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
  *   fem_server --scene FILE --print-config           the resolved scene (file + --set), then exit
+ *   fem_server --scene FILE --fem-only [--out DIR]   the tire model alone (fem.supports, fem.loads)
  *   --resume DIR: continue the run of DIR from its last checkpoint
  *
  * Builds the tire model of the scene's `fem` section, solves the initial
@@ -55,7 +56,7 @@ static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
 
 typedef struct options {
     const char *scene, *shm, *out, *export_mesh, *resume;
-    int print_config;
+    int print_config, fem_only;
 } options;
 
 /* The record stage's hook: tire snapshots (fem.h5) every fem.output.every
@@ -157,6 +158,65 @@ static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, cm_error *err
     return CM_OK;
 }
 
+/* --fem-only: the tire model alone, no DEM peer (verification, e.g. a bar
+ * under an end load): the static solve under the scene's supports and
+ * loads, or (fem.analysis = "dynamic") the response from rest to
+ * run.end_time, snapshots every fem.output.every steps. Results in fem.h5
+ * and fem_series.csv. */
+static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_error *err)
+{
+    double end_time = 0;
+    int rc = cm_scene_double_opt(scene, "run.end_time", 0.0, 1e9, 0.0, &end_time, err);
+    if (rc)
+        return rc;
+    if (cfg->analysis == FEM_ANALYSIS_DYNAMIC && !(end_time > 0))
+        return cm_fail(err, CM_ERR_KEY, "%s: fem.analysis = \"dynamic\" needs run.end_time > 0", o->scene);
+    cm_scene_mark_known(scene, "run");
+    cm_scene_mark_known(scene, "coupling");
+    cm_scene_mark_known(scene, "wheel");
+    cm_scene_mark_known(scene, "dem");
+    static const char *const sections[] = {"run", "coupling", "wheel", "fem", "dem", NULL};
+    if ((rc = cm_scene_check_unknown(scene, sections, err)))
+        return rc;
+    snprintf(cfg->output_dir, sizeof cfg->output_dir, "%s", o->out);
+    fem_model *m = NULL;
+    if ((rc = fem_create(cfg, &m, err)))
+        return rc;
+    double t0 = cm_now();
+    if (cfg->analysis == FEM_ANALYSIS_STATIC) {
+        if ((rc = fem_solve_static(m, err)) == CM_OK)
+            rc = fem_write_snapshot(m, err);
+    } else { /* from rest, the loads applied at t = 0 */
+        long steps = 0;
+        rc = fem_write_snapshot(m, err);
+        while (rc == CM_OK && fem_time(m) < end_time * (1 - 1e-12)) {
+            if ((rc = fem_advance(m, NULL, cfg->dt, err)) == CM_OK)
+                rc = fem_output_due(m, err);
+            steps++;
+        }
+        if (rc == CM_OK)
+            cm_log_info("dynamic: %ld steps of %.4g s to t = %.6g s in %.2f s", steps, cfg->dt, fem_time(m),
+                        cm_now() - t0);
+    }
+    if (rc == CM_OK) {
+        int nn, nt;
+        fem_mesh_size(m, &nn, &nt);
+        const double *u = fem_displacement(m);
+        double umax = 0;
+        for (int d = 0; d < 3 * nn; d++)
+            umax = fabs(u[d]) > umax ? fabs(u[d]) : umax;
+        fem_energy en;
+        fem_get_energy(m, &en);
+        cm_log_info("fem-only %s: %d nodes, %d tetrahedra; max |u component| %.6g m, elastic energy %.6g J; results: "
+                    "%s/fem.h5, %s/fem_series.csv",
+                    cfg->analysis == FEM_ANALYSIS_STATIC ? "static" : "dynamic", nn, nt, umax, en.elastic, o->out,
+                    o->out);
+        cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(m));
+    }
+    fem_destroy(&m);
+    return rc;
+}
+
 static int run(const options *o)
 {
     cm_error err = {0};
@@ -170,6 +230,13 @@ static int run(const options *o)
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
     fem_config cfg = fem_config_default();
+    if (o->fem_only) {
+        if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = fem_config_read(scene, &cfg, &err)) ||
+            (rc = run_fem_only(o, scene, &cfg, &err)))
+            goto fail;
+        exit_code = 0;
+        goto cleanup;
+    }
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
         (rc = fem_config_read(scene, &cfg, &err)))
         goto fail;
@@ -365,12 +432,16 @@ static int usage(void)
     fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
                     "       fem_server --scene FILE [--set KEY=VALUE]... --print-config\n"
+                    "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
                     "  with the physical groups rim, cavity and contact, and exits.\n"
                     "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n"
                     "  --print-config prints the scene as resolved (the file with every --set applied) in\n"
-                    "  libconfig syntax on stdout and exits: scripts read settings from it.\n");
+                    "  libconfig syntax on stdout and exits: scripts read settings from it.\n"
+                    "  --fem-only runs the tire model alone, no DEM peer: the static solve under\n"
+                    "  fem.supports and fem.loads, or with fem.analysis = \"dynamic\" the response\n"
+                    "  from rest to run.end_time; results in DIR/fem.h5 and DIR/fem_series.csv.\n");
     return 2;
 }
 
@@ -389,6 +460,8 @@ int main(int argc, char **argv)
             o.resume = o.out = argv[++i];
         else if (strcmp(argv[i], "--print-config") == 0)
             o.print_config = 1;
+        else if (strcmp(argv[i], "--fem-only") == 0)
+            o.fem_only = 1;
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
             o.export_mesh = argv[++i];
         else if (strcmp(argv[i], "--set") == 0 && i + 1 < argc) {
@@ -400,7 +473,7 @@ int main(int argc, char **argv)
         } else
             return usage();
     }
-    if (!o.scene || (!o.shm && !o.export_mesh && !o.print_config))
+    if (!o.scene || (!o.shm && !o.export_mesh && !o.print_config && !o.fem_only))
         return usage();
     if (o.print_config) { /* the scene as resolved: file + --set, libconfig syntax */
         cm_error err = {0};

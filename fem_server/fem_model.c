@@ -26,6 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fem_bc.h"
 #include "fem_element.h"
 #include "fem_model.h"
 #include "log.h"
@@ -136,7 +137,7 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     rc = fem_solver_create(&m->mesh, cfg->E, cfg->nu, cfg->rho, cfg->rayleigh_alpha, cfg->rayleigh_beta, &m->s, err);
     if (rc)
         goto fail;
-    rc = fem_solver_constrain_rim(m->s, &m->mesh, err);
+    rc = fem_bc_constrain(m->s, &m->mesh, cfg, err);
     if (rc)
         goto fail;
     m->b_pressure = calloc((size_t)m->s->n_dof, sizeof(double));
@@ -146,6 +147,8 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
         goto fail;
     }
     fem_load_pressure(&m->mesh, FEM_FACE_CAVITY, cfg->pressure, m->b_pressure);
+    if ((rc = fem_bc_loads(&m->mesh, cfg, m->b_pressure, err)))
+        goto fail;
     rc = build_interface(m, err);
     if (rc)
         goto fail;

@@ -12,7 +12,8 @@ struct fem_model {
     fem_config cfg;
     fem_mesh mesh;
     fem_solver *s;
-    double *b_pressure;     /* consistent pressure load per dof (rim frame, constant) [N] */
+    double *b_pressure;     /* the dead loads per dof (rim frame, constant) [N]: the inflation pressure and
+                               fem.loads */
     /* DEM interface */
     uint32_t n_if_nodes, n_if_tris;
     uint32_t *if_nodes;     /* mesh node ids */

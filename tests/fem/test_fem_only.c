@@ -21,15 +21,21 @@ static const double k_sigma = 1e5, k_E = 1e7, k_L = 0.2, k_A = 0.02 * 0.02;
 
 /* Runs fem_server --fem-only on the bar with extra arguments; returns its
  * exit status, the log and the folder in out. */
-static int fem_only(const char *tag, const char *extra, char *out, size_t len, char *log, size_t loglen)
+static int fem_only_scene(const char *scene, const char *tag, const char *extra, char *out, size_t len, char *log,
+                          size_t loglen)
 {
     snprintf(out, len, "/tmp/demfem-femonly-%d-%s", (int)getpid(), tag);
     snprintf(log, loglen, "%s.log", out);
     char cmd[2048];
     snprintf(cmd, sizeof cmd, "mkdir -p '%s' && '%s/fem_server/fem_server' --scene '%s' --fem-only --out '%s' %s > '%s' 2>&1",
-             out, DEMFEM_BUILD_DIR, BAR, out, extra, log);
+             out, DEMFEM_BUILD_DIR, scene, out, extra, log);
     int st = system(cmd);
     return st == -1 || !WIFEXITED(st) ? -1 : WEXITSTATUS(st);
+}
+
+static int fem_only(const char *tag, const char *extra, char *out, size_t len, char *log, size_t loglen)
+{
+    return fem_only_scene(BAR, tag, extra, out, len, log, loglen);
 }
 
 static const char *slurp(const char *path)
@@ -97,6 +103,26 @@ static int bar_static_closed_form(void)
     return 0;
 }
 
+/* A prescribed end displacement (a support with a value) instead of the
+ * load: the same state, so the same elastic energy, exactly. */
+static int bar_prescribed_displacement(void)
+{
+    char out[256], log[300];
+    int st = fem_only_scene(DEMFEM_SOURCE_DIR "/tests/fem/scenes/bar_end_displacement.cfg", "disp", "", out,
+                            sizeof out, log, sizeof log);
+    if (st != 0)
+        fprintf(stderr, "%s\n", slurp(log));
+    ENSURE(st == 0);
+    double umax[4], el[4];
+    ENSURE(series_column(out, "umax", umax, 4) == 1 && series_column(out, "elastic", el, 4) == 1);
+    double e_exact = k_sigma * k_sigma / (2 * k_E) * k_A * k_L;
+    printf("  elastic energy %.12g J (closed form %.12g)\n", el[0], e_exact);
+    ENSURE(umax[0] == 0.002);
+    ENSURE_REL(el[0], e_exact, 1e-9);
+    cleanup(out, log);
+    return 0;
+}
+
 /* Dynamic: the same load applied at once to the bar at rest; the tip
  * overshoots to twice the static displacement after 2 L / c (undamped). */
 static int bar_dynamic_step_load(void)
@@ -150,6 +176,7 @@ static int supports_and_loads_checked(void)
 
 static const test_case tests[] = {
     {"bar_static_closed_form", bar_static_closed_form},
+    {"bar_prescribed_displacement", bar_prescribed_displacement},
     {"bar_dynamic_step_load", bar_dynamic_step_load},
     {"supports_and_loads_checked", supports_and_loads_checked},
 };

@@ -150,7 +150,7 @@ static int stage_check_frame(fem_coupled *c, exchange *x, cm_error *err)
 /* check_balance: nodal forces against the contact totals (eq. 42 keeps
  * resultant and moment); positions are those the DEM saw, moments about the
  * world origin as the protocol defines them. Recorded, reported at the end. */
-static void stage_check_balance(fem_coupled *c, const exchange *x)
+static fem_exchange_status stage_check_balance(fem_coupled *c, const exchange *x)
 {
     double fs[3] = {0}, ms[3] = {0};
     for (uint32_t i = 0; i < c->nn; i++) {
@@ -168,6 +168,7 @@ static void stage_check_balance(fem_coupled *c, const exchange *x)
         c->max_force_mismatch = df > c->max_force_mismatch ? df : c->max_force_mismatch;
         c->max_moment_mismatch = dm > c->max_moment_mismatch ? dm : c->max_moment_mismatch;
     }
+    return FEM_EXCHANGE_NEXT;
 }
 
 /* place_wheel: at the first exchange, lower the wheel until its lowest
@@ -373,12 +374,19 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
 
 /* ---- the pipeline ---------------------------------------------------------------------------------------- */
 
-/* Times one stage into the profile. */
+/* Times one stage into the profile; its status goes to st. */
 #define STAGE(id, call)                                                                                        \
     do {                                                                                                       \
         double t0_ = cm_now();                                                                                 \
         st = (call);                                                                                           \
         c->prof.seconds[id] += cm_now() - t0_;                                                                 \
+    } while (0)
+/* The same, and the exchange ends there unless the stage let it go on. */
+#define STAGE_OR_RETURN(id, call)                                                                              \
+    do {                                                                                                       \
+        STAGE(id, call);                                                                                       \
+        if (st != FEM_EXCHANGE_NEXT)                                                                           \
+            return st;                                                                                         \
     } while (0)
 
 /* A stage's cm status as the exchange's. */
@@ -389,37 +397,26 @@ fem_exchange_status fem_exchange(fem_coupled *c, cm_error *err)
     exchange x;
     memset(&x, 0, sizeof x);
     fem_exchange_status st;
-    STAGE(FEM_STAGE_RECEIVE, stage_receive(c, &x));
-    if (st != FEM_EXCHANGE_NEXT)
-        return st;
+    STAGE_OR_RETURN(FEM_STAGE_RECEIVE, stage_receive(c, &x));
     STAGE(FEM_STAGE_CHECK_FRAME, failed(stage_check_frame(c, &x, err)));
-    if (st == FEM_EXCHANGE_NEXT) {
-        double t0 = cm_now();
-        stage_check_balance(c, &x);
-        c->prof.seconds[FEM_STAGE_CHECK_BALANCE] += cm_now() - t0;
+    if (st == FEM_EXCHANGE_NEXT)
+        STAGE(FEM_STAGE_CHECK_BALANCE, stage_check_balance(c, &x));
+    if (st == FEM_EXCHANGE_NEXT)
         STAGE(FEM_STAGE_PLACE_WHEEL, failed(stage_place_wheel(c, &x, err)));
-    }
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_ADVANCE, failed(stage_advance(c, &x, err)));
-    else
+    if (st != FEM_EXCHANGE_NEXT) { /* from the advance on, the frame is released there */
         ipc_recv_release(c->ch);
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_SNAPSHOT, failed(stage_snapshot(c, err)));
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_UPDATE_DRIVE, failed(stage_update_drive(c, &x, err)));
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_PACK_REPLY, stage_pack_reply(c, &x));
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_CHECK_WORK, failed(stage_check_work(c, &x, err)));
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_SEND, stage_send(c, &x));
-    if (st == FEM_EXCHANGE_NEXT)
-        STAGE(FEM_STAGE_RECORD, failed(stage_record(c, &x, err)));
-    if (st == FEM_EXCHANGE_NEXT) {
-        c->prof.exchanges++;
-        c->n++;
+        return st;
     }
-    return st;
+    STAGE_OR_RETURN(FEM_STAGE_ADVANCE, failed(stage_advance(c, &x, err)));
+    STAGE_OR_RETURN(FEM_STAGE_SNAPSHOT, failed(stage_snapshot(c, err)));
+    STAGE_OR_RETURN(FEM_STAGE_UPDATE_DRIVE, failed(stage_update_drive(c, &x, err)));
+    STAGE_OR_RETURN(FEM_STAGE_PACK_REPLY, stage_pack_reply(c, &x));
+    STAGE_OR_RETURN(FEM_STAGE_CHECK_WORK, failed(stage_check_work(c, &x, err)));
+    STAGE_OR_RETURN(FEM_STAGE_SEND, stage_send(c, &x));
+    STAGE_OR_RETURN(FEM_STAGE_RECORD, failed(stage_record(c, &x, err)));
+    c->prof.exchanges++;
+    c->n++;
+    return FEM_EXCHANGE_NEXT;
 }
 
 /* ---- profile --------------------------------------------------------------------------------------------- */

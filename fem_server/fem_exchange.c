@@ -358,6 +358,7 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
         series_buf *tv = &c->travel;
         fem_ckpt_run cr = {.exchange = c->n, .drive = &c->ds, .w_fem = c->w_fem,
                            .max_force_mismatch = c->max_force_mismatch, .max_moment_mismatch = c->max_moment_mismatch,
+                           .work_abs = c->work_abs, .work_scale = c->work_scale,
                            .n_nodes = c->nn, .x_prev = c->x_prev, .travel_n = tv->n,
                            .travel = {tv->col[SER_TH], tv->col[SER_TR], tv->col[SER_TP], tv->col[SER_SINK],
                                       tv->col[SER_SLIP], tv->col[SER_FX], tv->col[SER_MY]},

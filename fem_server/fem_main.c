@@ -368,6 +368,8 @@ static int run(const options *o)
         c.w_fem = cr.w_fem;
         c.max_force_mismatch = cr.max_force_mismatch;
         c.max_moment_mismatch = cr.max_moment_mismatch;
+        c.work_abs = cr.work_abs;
+        c.work_scale = cr.work_scale;
         series_rows = cr.series_rows;
         c.n = resume_exchange + 1;
         cm_log_info("resuming from %s after exchange %ld (t = %.6f s)", ckpt_path, resume_exchange, fem_time(model));

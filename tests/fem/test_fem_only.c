@@ -147,6 +147,23 @@ static int bar_dynamic_step_load(void)
     return 0;
 }
 
+/* Without any load (b0 = 0) the static solve factorizes nothing: u0 = 0
+ * (issue 18: 29 s of factorizing for a 165 000-tet mesh with no load). */
+static int no_load_skips_factorization(void)
+{
+    char out[256], log[300];
+    int st = fem_only("noload", "--set 'fem.loads.[0].value=[0, 0, 0]'", out, sizeof out, log, sizeof log);
+    const char *text = slurp(log);
+    if (st != 0)
+        fprintf(stderr, "%s\n", text);
+    ENSURE(st == 0);
+    ENSURE(strstr(text, "static solve: no load (b0 = 0)") && !strstr(text, "cholmod"));
+    double umax[4];
+    ENSURE(series_column(out, "umax", umax, 4) == 1 && umax[0] == 0.0);
+    cleanup(out, log);
+    return 0;
+}
+
 /* The new keys are checked as strictly as the others: the key and the file. */
 static int supports_and_loads_checked(void)
 {
@@ -178,6 +195,7 @@ static const test_case tests[] = {
     {"bar_static_closed_form", bar_static_closed_form},
     {"bar_prescribed_displacement", bar_prescribed_displacement},
     {"bar_dynamic_step_load", bar_dynamic_step_load},
+    {"no_load_skips_factorization", no_load_skips_factorization},
     {"supports_and_loads_checked", supports_and_loads_checked},
 };
 

@@ -324,8 +324,18 @@ int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, do
     fem_solver_matvec(s, s->u_fixed, s->tmp);
     for (int d = 0; d < s->n_dof; d++)
         r[d] = s->fixed[d] ? 0.0 : b[d] - s->tmp[d];
+    /* No load on the free dofs: u = u_c exactly, and K need not be
+     * factorized (29 s for a 165 000-tet mesh); iters = 0 says so. */
+    bool loaded = false;
+    for (int d = 0; d < s->n_dof && !loaded; d++)
+        loaded = r[d] != 0.0;
     int rc;
-    if (kind == FEM_LINEAR_CHOLMOD) {
+    if (!loaded) {
+        memset(s->tmp, 0, (size_t)s->n_dof * sizeof *s->tmp);
+        if (iters)
+            *iters = 0;
+        rc = CM_OK;
+    } else if (kind == FEM_LINEAR_CHOLMOD) {
         rc = static_cholmod(s, r, s->tmp, err);
         if (iters)
             *iters = 1;

@@ -62,7 +62,8 @@ int fem_solver_constrain_rim(fem_solver *s, const fem_mesh *m, cm_error *err);
 void fem_solver_matvec(const fem_solver *s, const double *x, double *y);
 
 /* K u = b with the constraints: u (all dofs) gets the prescribed values on
- * fixed dofs. CG stops at |r| <= tol |b_free|; iters may be NULL. */
+ * fixed dofs. CG stops at |r| <= tol |b_free|; iters may be NULL. When
+ * b_free - (K u_c)_free = 0 nothing is solved (u = u_c) and *iters = 0. */
 int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
                       double *u, int *iters, cm_error *err);
 

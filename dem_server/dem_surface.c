@@ -163,6 +163,8 @@ typedef struct cand {
     int tri, region;
     double bary[3], p[3], d2;
     int keep, near; /* near: index in the list of every triangle touched */
+    int patch;      /* merge_patches: the kept contact whose patch this candidate shares */
+    double w;       /* its share of that contact's reaction (unnormalised, kept one 1) */
 } cand;
 
 /* One thread's buffers for one grain's candidates, `cap` of each. They grow
@@ -170,11 +172,12 @@ typedef struct cand {
  * rare event, logged once per new size after the pass. */
 struct dem_surf_scratch {
     int cap;
-    cand *cd;
-    int *near, *comp;            /* every touched triangle; union-find parent */
+    cand *cd, *cd2;
+    int *near, *comp, *kidx;     /* every touched triangle; union-find parent; kept candidates */
     double (*sh_n)[3], *sh_depth, *sh_r, (*pu)[3]; /* shaped grains' side arrays */
     int *slot_of;
-    vec3 *nrm;
+    vec3 *nrm, *peff;
+    int n_shared;                /* candidates after the kept ones that share their reaction */
     int grew_grain;              /* slot of the grain that last grew them this pass, -1 none */
     int nomem;                   /* a growth failed this pass */
 };
@@ -182,8 +185,8 @@ typedef struct dem_surf_scratch surf_scratch;
 
 static void scratch_free(surf_scratch *sc)
 {
-    free(sc->cd), free(sc->near), free(sc->comp), free(sc->sh_n), free(sc->sh_depth), free(sc->sh_r);
-    free(sc->pu), free(sc->slot_of), free(sc->nrm);
+    free(sc->cd), free(sc->cd2), free(sc->near), free(sc->comp), free(sc->kidx), free(sc->sh_n), free(sc->sh_depth);
+    free(sc->sh_r), free(sc->pu), free(sc->slot_of), free(sc->nrm), free(sc->peff);
     memset(sc, 0, sizeof *sc);
 }
 
@@ -199,8 +202,11 @@ static int scratch_grow(surf_scratch *sc, int cap)
         sc->field = p_;                                              \
     } while (0)
     GROW(cd);
+    GROW(cd2);
     GROW(near);
     GROW(comp);
+    GROW(kidx);
+    GROW(peff);
     GROW(sh_n);
     GROW(sh_depth);
     GROW(sh_r);
@@ -418,15 +424,18 @@ static vec3 sphere_normal(const dem_surface *s, vec3 c, double r, const cand *q)
 /* One contact per surface patch (issue 16). The kept candidates cd[0..k)
  * (deepest first) are local minima of the distance; on a dented, concave
  * surface there is one on nearly every facet of the dent, and each used to
- * push with a full sphere–plane force (an elastic impact into a dent left
- * with up to 4.5 times its energy). A candidate is dropped when a deeper
- * kept one is in the same patch: its normal within 45° (DEM_SURF_PATCH_COS)
- * and the two connected through triangles that all touch the grain (sharing
- * a node). What remains is the patch's deepest point, whose force is the
- * exact gradient of the Hertz energy of the grain's distance to the surface,
- * passed to its triangle's nodes by eq. 42: energy and moment are conserved.
- * A lug's root (normals 90° apart) or a grain bridging a groove (the bottom
- * out of reach, no connection) keeps one contact per face. */
+ * push with a full sphere–plane force (an elastic impact into a rigid dent
+ * left with up to 17 % more energy than it brought). A candidate joins a
+ * deeper kept one when it is in the same patch: its normal within 45°
+ * (DEM_SURF_PATCH_COS) and the two connected through triangles that all
+ * touch the grain (sharing a node). The contact has the patch's largest
+ * overlap; minima within DEM_SURF_SHARE of it share the reaction (fading
+ * linearly), so that the load on a soft FE surface does not jump from facet
+ * to facet of the dent it makes (the explicit FEM pumps energy then). A
+ * lug's root (normals 90° apart) or a grain bridging a groove (the bottom
+ * out of reach, no connection) keeps one contact per face.
+ * On return cd[0..m) are the contacts, cd[m..m+n_shared) the sharing minima
+ * (patch: their contact, w: their weight, the contact's own being 1). */
 static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *sc, int n, int k)
 {
     cand *cd = sc->cd;
@@ -446,17 +455,40 @@ static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *s
         }
     }
     vec3 *nrm = sc->nrm;
-    int m = 0;
+    int *kidx = sc->kidx, m = 0;
     for (int a = 0; a < k; a++) {
         vec3 na = sphere_normal(s, c, r, &cd[a]);
-        int root = comp_find(comp, cd[a].near), dup = 0;
-        for (int b = 0; b < m && !dup; b++)
-            dup = comp_find(comp, cd[b].near) == root && v3_dot(na, nrm[b]) > DEM_SURF_PATCH_COS;
-        if (dup)
+        int root = comp_find(comp, cd[a].near);
+        cd[a].patch = -1;
+        for (int b = 0; b < m && cd[a].patch < 0; b++)
+            if (comp_find(comp, cd[kidx[b]].near) == root && v3_dot(na, nrm[b]) > DEM_SURF_PATCH_COS)
+                cd[a].patch = b;
+        if (cd[a].patch >= 0)
             continue;
+        cd[a].patch = m, cd[a].w = 1.0;
         nrm[m] = na;
-        cd[m++] = cd[a];
+        kidx[m++] = a;
     }
+    /* the kept contacts first, then the shallower minima of their patches
+     * that share the reaction: weight 1 - (delta_max - delta)/(s delta_max),
+     * s = DEM_SURF_SHARE, nothing below */
+    cand *out = sc->cd2;
+    for (int b = 0; b < m; b++)
+        out[b] = cd[kidx[b]];
+    int e = m;
+    for (int a = 0; a < k; a++) {
+        const cand *kc = &cd[kidx[cd[a].patch]];
+        if (kc == &cd[a])
+            continue;
+        double dmax = r - sqrt(kc->d2), da = r - sqrt(cd[a].d2);
+        double w = dmax > 0.0 ? 1.0 - (dmax - da) / (DEM_SURF_SHARE * dmax) : 0.0;
+        if (w > 0.0) {
+            out[e] = cd[a];
+            out[e++].w = w;
+        }
+    }
+    memcpy(cd, out, (size_t)e * sizeof *cd);
+    sc->n_shared = e - m;
     return m;
 }
 
@@ -473,6 +505,7 @@ static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *s
 static int grain_candidates(const dem_surface *s, int i, vec3 c, double r, surf_scratch *sc, int *overflow)
 {
     int n = 0;
+    sc->n_shared = 0;
     near_iter it;
     near_begin(&it, s, c, r, overflow);
     cand q;
@@ -547,6 +580,7 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_s
 {
     const dem_surface *s = w->surf;
     int n = 0;
+    sc->n_shared = 0;
     double p[3] = {c.x, c.y, c.z}, inv_l = 1.0 / r, zero[3] = {0, 0, 0};
     dem_body gb;
     dem_grain_body(w, i, p, inv_l, &gb);
@@ -720,9 +754,24 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             }
             int taken[DEM_SURF_SLOTS] = {0};
             int *slot_of = sc->slot_of;
-            vec3 *nrm = sc->nrm;
+            vec3 *nrm = sc->nrm, *peff = sc->peff;
+            const int ns = sc->n_shared; /* cd[m .. m+ns): shares of the kept contacts' reactions */
             for (int a = 0; a < m; a++) {
                 nrm[a] = shaped ? v3_load(sh_n[a]) : sphere_normal(s, c, r, &cd[a]);
+                peff[a] = v3_load(cd[a].p);
+                if (ns > 0) { /* a shared patch: the contact point is the weighted mean of its minima */
+                    double wsum = 1.0;
+                    for (int j = m; j < m + ns; j++)
+                        if (cd[j].patch == a)
+                            peff[a] = v3_axpy(cd[j].w, v3_load(cd[j].p), peff[a]), wsum += cd[j].w;
+                    if (wsum > 1.0) {
+                        peff[a] = v3_scale(peff[a], 1.0 / wsum);
+                        vec3 l = v3_sub(c, peff[a]);
+                        double ll = v3_norm(l);
+                        if (ll > 1e-12 * r)
+                            nrm[a] = v3_scale(l, 1.0 / ll);
+                    }
+                }
                 /* history slot: the used one with the closest normal (keyed
                  * by grain and patch, not by triangle: the spring survives
                  * the contact point crossing triangle edges) */
@@ -759,12 +808,28 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             vec3 vi = v3(g->vx[i], g->vy[i], g->vz[i]), wi = v3(g->wx[i], g->wy[i], g->wz[i]);
             vec3 fsum = v3(0, 0, 0), tsum = v3(0, 0, 0);
             for (int a = 0; a < m; a++) {
-                const int *tn = s->tri + 3 * cd[a].tri;
-                const double *bw = cd[a].bary;
+                /* the triangles carrying the contact: its own and, in a
+                 * shared patch, those of its shallower minima, weights
+                 * normalised */
+                double wsum = 1.0;
+                for (int j = m; j < m + ns; j++)
+                    if (cd[j].patch == a)
+                        wsum += cd[j].w;
                 vec3 vs = v3(0, 0, 0);
-                for (int k = 0; k < 3; k++)
-                    vs = v3_axpy(bw[k], v3_load(s->v + 3 * tn[k]), vs);
-                vec3 p = v3_load(cd[a].p);
+                double inv_ms = 0.0;
+                for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
+                    if (j != a && cd[j].patch != a)
+                        continue;
+                    const int *tn = s->tri + 3 * cd[j].tri;
+                    double wj = (j == a ? 1.0 : cd[j].w) / wsum;
+                    for (int k = 0; k < 3; k++) {
+                        double bk = wj * cd[j].bary[k];
+                        vs = v3_axpy(bk, v3_load(s->v + 3 * tn[k]), vs);
+                        if (s->inv_mass)
+                            inv_ms += bk * bk * s->inv_mass[tn[k]];
+                    }
+                }
+                vec3 p = peff[a];
                 vec3 lever = v3_sub(p, c);
                 vec3 vrel = v3_sub(v3_add(vi, v3_cross(wi, lever)), vs);
                 double xi_tmp[3] = {0, 0, 0};
@@ -774,13 +839,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                  * is 1 / sum(w_k^2 / m_k). With the grain's mass alone the
                  * dashpot over-damps light FE nodes and the explicit exchange
                  * goes unstable (c dt / m_node > 2). */
-                double m_pair = m_i;
-                if (s->inv_mass) {
-                    double inv_ms = 0.0;
-                    for (int k = 0; k < 3; k++)
-                        inv_ms += bw[k] * bw[k] * s->inv_mass[tn[k]];
-                    m_pair = 1.0 / (1.0 / m_i + inv_ms);
-                }
+                double m_pair = s->inv_mass ? 1.0 / (1.0 / m_i + inv_ms) : m_i;
                 double fn;
                 double delta = shaped ? sh_depth[a] : r - sqrt(cd[a].d2), Rc = shaped ? sh_r[a] : r;
                 vec3 F = dem_hm_force(cf, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
@@ -791,13 +850,21 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 fsum = v3_add(fsum, F);
                 tsum = v3_add(tsum, v3_cross(lever, F));
                 tsum = v3_add(tsum, dem_rolling_torque(cf, Rc, fn, wi, 1.0 / g->inv_i[i], dt));
-                /* reaction on the surface, to the nodes by barycentric weights (eq. 42) */
+                /* reaction on the surface, to the nodes by barycentric weights
+                 * (eq. 42), times the shares in a shared patch: the contact
+                 * point is the same weighted mean, so force and moment balance */
                 vec3 Fs = v3_scale(F, -1.0);
-                for (int k = 0; k < 3; k++) {
-                    double *f = nf + 3 * tn[k];
-                    f[0] += bw[k] * Fs.x;
-                    f[1] += bw[k] * Fs.y;
-                    f[2] += bw[k] * Fs.z;
+                for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
+                    if (j != a && cd[j].patch != a)
+                        continue;
+                    const int *tn = s->tri + 3 * cd[j].tri;
+                    double wj = (j == a ? 1.0 : cd[j].w) / wsum;
+                    for (int k = 0; k < 3; k++) {
+                        double bk = wj * cd[j].bary[k], *f = nf + 3 * tn[k];
+                        f[0] += bk * Fs.x;
+                        f[1] += bk * Fs.y;
+                        f[2] += bk * Fs.z;
+                    }
                 }
                 v3_store(tot->force, v3_add(v3_load(tot->force), Fs));
                 v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_cross(v3_sub(p, ref), Fs)));

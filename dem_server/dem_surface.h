@@ -32,6 +32,10 @@ typedef struct dem_bvh_node {
  * touch the grain: a dent is one contact, a lug's root two. The same angle
  * matches a contact to its tangential history slot. */
 #define DEM_SURF_PATCH_COS 0.7
+/* The patch's shallower minima within this fraction of its overlap share
+ * its reaction (linearly fading to none): a soft FE surface loaded on one
+ * triangle of an even dent otherwise sees the load jump between its facets. */
+#define DEM_SURF_SHARE 0.1
 
 struct dem_surf_scratch;
 

@@ -666,6 +666,52 @@ static int dent_node_balance(void)
     return 0;
 }
 
+/* A grain held at a constant overlap slides along a dent (moved on an arc
+ * about the dent's centre, 0.3 rad: its contact point travels 3.75 mm,
+ * three facets):
+ * the tangential spring is keyed by grain and patch, not by triangle, so
+ * the friction force stays at the Coulomb limit throughout (a reset would
+ * drop it to the tiny elastic increment of one step). */
+static int dent_slide_keeps_history(void)
+{
+    const double hd = 0.15 * RS, s = RS / 8.0, rd = 1.25 * RS, delta = 0.02 * RS, mu = 0.5;
+    dem_world *w = steel_rubber_world(1e-6, mu, 4, 1);
+    ENSURE(w);
+    ENSURE(dented_surface(w, 24, s, rd, hd) == 0);
+    const double oz = rd - hd, arm = rd - RS + delta, phi_end = 0.3, dt = 1e-6;
+    const int steps = 3000;
+    const double dphi = phi_end / steps;
+    cm_error err = {0};
+    double x[3] = {0, 0, oz - arm};
+    ENSURE(dem_grain_add(w, x, RS, 0, NULL, &err) == 0);
+    double worst = INFINITY, fn_mean = 0;
+    int counted = 0;
+    for (int st = 0; st <= steps; st++) {
+        double phi = st * dphi;
+        double c[3] = {arm * sin(phi), 0, oz - arm * cos(phi)};
+        double v[3] = {arm * cos(phi) * dphi / dt, 0, arm * sin(phi) * dphi / dt};
+        ENSURE(dem_grain_set(w, 0, c, v, NULL) == 0);
+        ENSURE(dem_step_surface(w, &err) == 0);
+        dem_grain_state g;
+        dem_grain_get(w, 0, &g);
+        double n[3] = {-sin(phi), 0, cos(phi)}; /* from the bowl towards its centre */
+        double fn = g.f[0] * n[0] + g.f[1] * n[1] + g.f[2] * n[2], ft[3];
+        for (int k = 0; k < 3; k++)
+            ft[k] = g.f[k] - fn * n[k];
+        double ftm = sqrt(ft[0] * ft[0] + ft[1] * ft[1] + ft[2] * ft[2]);
+        if (st > steps / 10) {
+            worst = fmin(worst, ftm / (mu * fn));
+            fn_mean += fn, counted++;
+        }
+    }
+    printf("dent slide: F_n %.3f N, friction / (mu F_n) at least %.3f (the split uses the dent's radial normal, "
+           "not the facets': a reset would give %.4f)\n",
+           fn_mean / counted, worst, 2.5e4 * arm * dphi / (mu * fn_mean / counted));
+    ENSURE(worst > 0.5);
+    dem_world_destroy(&w);
+    return 0;
+}
+
 /* Error paths name the culprit. */
 static int errors_name_culprit(void)
 {
@@ -705,6 +751,7 @@ static const test_case tests[] = {
     {"fine_mesh_landing", fine_mesh_landing},
     {"concave_corner_contacts", concave_corner_contacts},
     {"dent_node_balance", dent_node_balance},
+    {"dent_slide_keeps_history", dent_slide_keeps_history},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -26,8 +26,8 @@ def main():
     print(f"Hertz: peak {fh:.2f} N, contact time {1e3 * th:.3f} ms, input energy {e_in:.4g} J")
     for d in sys.argv[1:]:
         try:
-            t = np.genfromtxt(os.path.join(d, "traction.csv"), delimiter=",", names=True)
-            s = np.genfromtxt(os.path.join(d, "dem_series.csv"), delimiter=",", names=True)
+            t = np.atleast_1d(np.genfromtxt(os.path.join(d, "traction.csv"), delimiter=",", names=True))
+            s = np.atleast_1d(np.genfromtxt(os.path.join(d, "dem_series.csv"), delimiter=",", names=True))
         except OSError as e:
             print(f"{d}: no results ({e})")
             continue

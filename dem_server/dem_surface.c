@@ -7,6 +7,7 @@
 #include "dem_contact.h"
 #include "dem_shape.h"
 #include "dem_world.h"
+#include "log.h"
 #include "vec3.h"
 
 #ifdef _OPENMP
@@ -156,6 +157,81 @@ void dem_surface_refit(dem_surface *s)
     }
 }
 
+/* ---- per-thread candidate buffers --------------------------------------- */
+
+typedef struct cand {
+    int tri, region;
+    double bary[3], p[3], d2;
+    int keep, near; /* near: index in the list of every triangle touched */
+    int patch;      /* merge_patches: the kept contact whose patch this candidate shares */
+    double w;       /* its share of that contact's reaction (unnormalised, kept one 1) */
+} cand;
+
+/* One thread's buffers for one grain's candidates, `cap` of each. They grow
+ * (doubling) inside the surface pass when a grain meets more triangles: a
+ * rare event, logged once per new size after the pass. */
+struct dem_surf_scratch {
+    int cap;
+    cand *cd, *cd2;
+    int *near, *comp, *kidx;     /* every touched triangle; union-find parent; kept candidates */
+    double (*sh_n)[3], *sh_depth, *sh_r, (*pu)[3]; /* shaped grains' side arrays */
+    int *slot_of;
+    vec3 *nrm, *peff;
+    int n_shared;                /* candidates after the kept ones that share their reaction */
+    int grew_grain;              /* slot of the grain that last grew them this pass, -1 none */
+    int nomem;                   /* a growth failed this pass */
+};
+typedef struct dem_surf_scratch surf_scratch;
+
+static void scratch_free(surf_scratch *sc)
+{
+    free(sc->cd), free(sc->cd2), free(sc->near), free(sc->comp), free(sc->kidx), free(sc->sh_n), free(sc->sh_depth);
+    free(sc->sh_r), free(sc->pu), free(sc->slot_of), free(sc->nrm), free(sc->peff);
+    memset(sc, 0, sizeof *sc);
+}
+
+/* Grows every buffer to cap entries, keeping their contents. */
+static int scratch_grow(surf_scratch *sc, int cap)
+{
+    size_t n = (size_t)cap;
+#define GROW(field)                                                  \
+    do {                                                             \
+        void *p_ = realloc(sc->field, n * sizeof *sc->field);        \
+        if (!p_)                                                     \
+            return CM_ERR_NOMEM;                                     \
+        sc->field = p_;                                              \
+    } while (0)
+    GROW(cd);
+    GROW(cd2);
+    GROW(near);
+    GROW(comp);
+    GROW(kidx);
+    GROW(peff);
+    GROW(sh_n);
+    GROW(sh_depth);
+    GROW(sh_r);
+    GROW(pu);
+    GROW(slot_of);
+    GROW(nrm);
+#undef GROW
+    sc->cap = cap;
+    return CM_OK;
+}
+
+/* Room for candidate n of grain slot i: doubles the buffers when full.
+ * Returns 0 when there is no room (out of memory, flagged). */
+static int scratch_room(surf_scratch *sc, int n, int i)
+{
+    if (n < sc->cap)
+        return 1;
+    if (sc->cap > (1 << 24) || scratch_grow(sc, 2 * sc->cap)) {
+        sc->nomem = 1;
+        return 0;
+    }
+    sc->grew_grain = i;
+    return 1;
+}
+
 int dem_surface_grow(dem_surface *s, int grain_cap)
 {
     size_t sz = (size_t)grain_cap * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
@@ -188,7 +264,6 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->n_tris = n_tris;
     s->material = material;
     s->n_threads = n_threads;
-    s->overflow_grain = -1;
     s->x = malloc(3 * (size_t)n_nodes * sizeof *s->x);
     s->v = calloc(3 * (size_t)n_nodes, sizeof *s->v);
     s->node_f = calloc(3 * (size_t)n_nodes, sizeof *s->node_f);
@@ -197,7 +272,12 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->perm = malloc((size_t)n_tris * sizeof *s->perm);
     s->ttot = calloc((size_t)n_threads, sizeof *s->ttot);
     s->tnode_f = n_threads > 1 ? calloc((size_t)(n_threads - 1) * 3 * (size_t)n_nodes, sizeof(double)) : NULL;
-    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || !s->ttot ||
+    s->scratch = calloc((size_t)n_threads, sizeof *s->scratch);
+    int bad = !s->scratch;
+    for (int t = 0; t < n_threads && !bad; t++)
+        bad = scratch_grow(&s->scratch[t], DEM_SURF_CAND_INIT);
+    s->cand_cap_logged = DEM_SURF_CAND_INIT;
+    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || !s->ttot || bad ||
         (n_threads > 1 && !s->tnode_f) || dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
         dem_surface_free(&s);
         return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
@@ -228,17 +308,14 @@ void dem_surface_free(dem_surface **sp)
     free(s->hist);
     free(s->ttot);
     free(s->tnode_f);
+    for (int t = 0; s->scratch && t < s->n_threads; t++)
+        scratch_free(&s->scratch[t]);
+    free(s->scratch);
     free(s);
     *sp = NULL;
 }
 
 /* ---- contacts ---------------------------------------------------------- */
-
-typedef struct cand {
-    int tri, region;
-    double bary[3], p[3], d2;
-    int keep;
-} cand;
 
 static int tri_has_node(const int *t, int node) { return t[0] == node || t[1] == node || t[2] == node; }
 
@@ -322,6 +399,99 @@ static inline int near_next(near_iter *it, int *t, int *region, double bary[3], 
     }
 }
 
+/* Union-find root of triangle a in the touched list, with path halving. */
+static int comp_find(int *comp, int a)
+{
+    while (comp[a] != a) {
+        comp[a] = comp[comp[a]];
+        a = comp[a];
+    }
+    return a;
+}
+
+/* Unit normal of a sphere's contact at closest point p: from p to the
+ * centre, or the face normal when the centre lies on the triangle. */
+static vec3 sphere_normal(const dem_surface *s, vec3 c, double r, const cand *q)
+{
+    double d = sqrt(q->d2);
+    if (d > 1e-12 * r)
+        return v3_scale(v3(c.x - q->p[0], c.y - q->p[1], c.z - q->p[2]), 1.0 / d);
+    const int *tn = s->tri + 3 * q->tri;
+    vec3 A = v3_load(s->x + 3 * tn[0]), B = v3_load(s->x + 3 * tn[1]), C = v3_load(s->x + 3 * tn[2]);
+    return v3_unit(v3_cross(v3_sub(B, A), v3_sub(C, A)));
+}
+
+/* One contact per surface patch (issue 16). The kept candidates cd[0..k)
+ * (deepest first) are local minima of the distance; on a dented, concave
+ * surface there is one on nearly every facet of the dent, and each used to
+ * push with a full sphere–plane force (an elastic impact into a rigid dent
+ * left with up to 17 % more energy than it brought). A candidate joins a
+ * deeper kept one when it is in the same patch: its normal within 45°
+ * (DEM_SURF_PATCH_COS) and the two connected through triangles that all
+ * touch the grain (sharing a node). The contact has the patch's largest
+ * overlap; minima within DEM_SURF_SHARE of it share the reaction (fading
+ * linearly), so that the load on a soft FE surface does not jump from facet
+ * to facet of the dent it makes (the explicit FEM pumps energy then). A
+ * lug's root (normals 90° apart) or a grain bridging a groove (the bottom
+ * out of reach, no connection) keeps one contact per face.
+ * On return cd[0..m) are the contacts, cd[m..m+n_shared) the sharing minima
+ * (patch: their contact, w: their weight, the contact's own being 1). */
+static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *sc, int n, int k)
+{
+    cand *cd = sc->cd;
+    int *comp = sc->comp;
+    const int *near = sc->near;
+    for (int a = 0; a < n; a++)
+        comp[a] = a;
+    for (int a = 0; a < n; a++) {
+        const int *ta = s->tri + 3 * near[a];
+        for (int b = a + 1; b < n; b++) {
+            const int *tb = s->tri + 3 * near[b];
+            if (!tri_has_node(tb, ta[0]) && !tri_has_node(tb, ta[1]) && !tri_has_node(tb, ta[2]))
+                continue;
+            int ra = comp_find(comp, a), rb = comp_find(comp, b);
+            if (ra != rb)
+                comp[ra > rb ? ra : rb] = ra < rb ? ra : rb;
+        }
+    }
+    vec3 *nrm = sc->nrm;
+    int *kidx = sc->kidx, m = 0;
+    for (int a = 0; a < k; a++) {
+        vec3 na = sphere_normal(s, c, r, &cd[a]);
+        int root = comp_find(comp, cd[a].near);
+        cd[a].patch = -1;
+        for (int b = 0; b < m && cd[a].patch < 0; b++)
+            if (comp_find(comp, cd[kidx[b]].near) == root && v3_dot(na, nrm[b]) > DEM_SURF_PATCH_COS)
+                cd[a].patch = b;
+        if (cd[a].patch >= 0)
+            continue;
+        cd[a].patch = m, cd[a].w = 1.0;
+        nrm[m] = na;
+        kidx[m++] = a;
+    }
+    /* the kept contacts first, then the shallower minima of their patches
+     * that share the reaction: weight 1 - (delta_max - delta)/(s delta_max),
+     * s = DEM_SURF_SHARE, nothing below */
+    cand *out = sc->cd2;
+    for (int b = 0; b < m; b++)
+        out[b] = cd[kidx[b]];
+    int e = m;
+    for (int a = 0; a < k; a++) {
+        const cand *kc = &cd[kidx[cd[a].patch]];
+        if (kc == &cd[a])
+            continue;
+        double dmax = r - sqrt(kc->d2), da = r - sqrt(cd[a].d2);
+        double w = dmax > 0.0 ? 1.0 - (dmax - da) / (DEM_SURF_SHARE * dmax) : 0.0;
+        if (w > 0.0) {
+            out[e] = cd[a];
+            out[e++].w = w;
+        }
+    }
+    memcpy(cd, out, (size_t)e * sizeof *cd);
+    sc->n_shared = e - m;
+    return m;
+}
+
 /* Contacts of one grain (slot i) with the surface; returns the number kept.
  * De-duplication: the contact points that count are the local minima of the
  * distance from the grain centre to the whole surface. A face point always is
@@ -330,21 +500,24 @@ static inline int near_next(near_iter *it, int *t, int *region, double bary[3], 
  * those are dropped. Of the rest, points that coincide (the same edge or
  * vertex reported by each of its triangles, or a face point on an edge) are
  * merged, deepest first. A grain on a flat triangulated plane then has exactly
- * one contact wherever it sits. */
-static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, int *overflow)
+ * one contact wherever it sits. Local minima of one surface patch (a dent)
+ * are then merged into its deepest (merge_patches). */
+static int grain_candidates(const dem_surface *s, int i, vec3 c, double r, surf_scratch *sc, int *overflow)
 {
     int n = 0;
+    sc->n_shared = 0;
     near_iter it;
     near_begin(&it, s, c, r, overflow);
     cand q;
     while (near_next(&it, &q.tri, &q.region, q.bary, q.p, &q.d2)) {
-        if (n == DEM_SURF_MAX_CAND) {
-            *overflow = 1;
-            continue;
-        }
+        if (!scratch_room(sc, n, i))
+            break;
         q.keep = 1;
-        cd[n++] = q;
+        q.near = n;
+        sc->near[n] = q.tri;
+        sc->cd[n++] = q;
     }
+    cand *cd = sc->cd;
     /* drop edge/vertex points that are not local minima */
     double tol = 1e-12 * r * r;
     for (int a = 0; a < n; a++) {
@@ -386,7 +559,7 @@ static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, in
         if (!dup)
             cd[k++] = cd[a];
     }
-    return k;
+    return k > 1 ? merge_patches(s, c, r, sc, n, k) : k;
 }
 
 /* Contacts of a shaped grain (slot i, bounding radius r about c) with the
@@ -403,13 +576,12 @@ static int grain_candidates(const dem_surface *s, vec3 c, double r, cand *cd, in
  * still cuts a flat ellipsoid's underside, and MPR reports it with a normal
  * tilted by ~25°) but gets one contact; in a groove with flanks at more than
  * 45°, one per flank. */
-static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *cd, double (*nr)[3], double *depth,
-                             double *rc, int *overflow)
+static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_scratch *sc, int *overflow)
 {
     const dem_surface *s = w->surf;
     int n = 0;
+    sc->n_shared = 0;
     double p[3] = {c.x, c.y, c.z}, inv_l = 1.0 / r, zero[3] = {0, 0, 0};
-    double pu[DEM_SURF_MAX_CAND][3]; /* contact points before clamping to their triangle */
     dem_body gb;
     dem_grain_body(w, i, p, inv_l, &gb);
     near_iter it;
@@ -427,10 +599,11 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *
         double dep, nn[3], pc[3];
         if (dem_body_penetration(&tb, &gb, 0, &dep, nn, pc) != 1)
             continue;
-        if (n == DEM_SURF_MAX_CAND) {
-            *overflow = 1;
-            continue;
-        }
+        if (!scratch_room(sc, n, i))
+            break;
+        /* the buffers may have moved */
+        cand *cd = sc->cd;
+        double(*nr)[3] = sc->sh_n, *depth = sc->sh_depth, *rc = sc->sh_r, (*pu)[3] = sc->pu;
         double mn[3] = {-nn[0], -nn[1], -nn[2]}, deep[3];
         dem_body_contact_point(&gb, nn, dep, 1.0, deep);
         for (int b = 0; b < 3; b++)
@@ -441,11 +614,14 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *
         q.tri = tri_id;
         q.d2 = -dep; /* sorts deepest first */
         q.keep = 1;
+        q.near = n;
         memcpy(nr[n], nn, sizeof nn);
         depth[n] = dep * r;
         rc[n] = dem_shape_contact_radius(gb.s, w->g.sc[i], gb.R, mn);
         cd[n++] = q;
     }
+    cand *cd = sc->cd;
+    double(*nr)[3] = sc->sh_n, *depth = sc->sh_depth, *rc = sc->sh_r, (*pu)[3] = sc->pu;
     /* as for spheres: a contact whose point lies on an edge or vertex is
      * dropped when a triangle sharing that feature has a deeper contact (the
      * grain overlaps the neighbour of the face it really rests on) */
@@ -474,7 +650,7 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *
         cd[best].keep = 2; /* taken in this round */
         int dup = 0;
         for (int b = 0; b < m && !dup; b++)
-            dup = nr[best][0] * nr[b][0] + nr[best][1] * nr[b][1] + nr[best][2] * nr[b][2] > 0.7;
+            dup = nr[best][0] * nr[b][0] + nr[best][1] * nr[b][1] + nr[best][2] * nr[b][2] > DEM_SURF_PATCH_COS;
         if (dup)
             continue;
         /* move best to position m (swap, including the side arrays) */
@@ -496,7 +672,7 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, cand *
         int bt = -1;
         double bd = INFINITY, bb[3], bp[3];
         for (int b = 0; b < n; b++) {
-            if (b != a && nr[a][0] * nr[b][0] + nr[a][1] * nr[b][1] + nr[a][2] * nr[b][2] <= 0.7)
+            if (b != a && nr[a][0] * nr[b][0] + nr[a][1] * nr[b][1] + nr[a][2] * nr[b][2] <= DEM_SURF_PATCH_COS)
                 continue;
             const int *tn = s->tri + 3 * cd[b].tri;
             double bary[3], cp[3];
@@ -529,7 +705,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     if (nt > 1)
         memset(s->tnode_f, 0, (size_t)(nt - 1) * (size_t)nn3 * sizeof *s->tnode_f);
     memset(s->ttot, 0, (size_t)nt * sizeof *s->ttot);
-    s->overflow_grain = -1;
+    for (int t = 0; t < nt; t++)
+        s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0;
     const dem_bvh_node *root = &s->bvh[0];
     const vec3 ref = v3_load(s->ref), dir = v3_load(s->travel);
     int overflow_slot = -1;
@@ -546,8 +723,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
         double *nf = tid == 0 ? s->node_f : s->tnode_f + (size_t)(tid - 1) * (size_t)nn3;
         dem_surface_total *tot = &s->ttot[tid];
-        cand cd[DEM_SURF_MAX_CAND];
-        double sh_n[DEM_SURF_MAX_CAND][3], sh_depth[DEM_SURF_MAX_CAND], sh_r[DEM_SURF_MAX_CAND];
+        surf_scratch *sc = &s->scratch[tid];
         for (int i = lo; i < hi; i++) {
             double r = g->r[i];
             vec3 c = v3(g->x[i], g->y[i], g->z[i]);
@@ -565,8 +741,10 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             }
             int overflow = 0;
             const int shaped = g->shape[i] >= 0;
-            int m = shaped ? shaped_candidates(w, i, c, r, cd, sh_n, sh_depth, sh_r, &overflow)
-                           : grain_candidates(s, c, r, cd, &overflow);
+            int m = shaped ? shaped_candidates(w, i, c, r, sc, &overflow) : grain_candidates(s, i, c, r, sc, &overflow);
+            /* the buffers may have grown: read them after the search */
+            const cand *cd = sc->cd;
+            const double(*sh_n)[3] = (const double(*)[3])sc->sh_n, *sh_depth = sc->sh_depth, *sh_r = sc->sh_r;
             if (overflow) {
 #ifdef _OPENMP
 #pragma omp critical(dem_surface_overflow)
@@ -575,22 +753,30 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                     overflow_slot = i;
             }
             int taken[DEM_SURF_SLOTS] = {0};
-            int slot_of[DEM_SURF_MAX_CAND];
-            vec3 nrm[DEM_SURF_MAX_CAND];
+            int *slot_of = sc->slot_of;
+            vec3 *nrm = sc->nrm, *peff = sc->peff;
+            const int ns = sc->n_shared; /* cd[m .. m+ns): shares of the kept contacts' reactions */
             for (int a = 0; a < m; a++) {
-                double d = shaped ? 0.0 : sqrt(cd[a].d2);
-                if (shaped) {
-                    nrm[a] = v3_load(sh_n[a]);
-                } else if (d > 1e-12 * r) {
-                    nrm[a] = v3_scale(v3(c.x - cd[a].p[0], c.y - cd[a].p[1], c.z - cd[a].p[2]), 1.0 / d);
-                } else { /* centre on the surface: use the face normal */
-                    const int *tn = s->tri + 3 * cd[a].tri;
-                    vec3 A = v3_load(s->x + 3 * tn[0]), B = v3_load(s->x + 3 * tn[1]), C = v3_load(s->x + 3 * tn[2]);
-                    nrm[a] = v3_unit(v3_cross(v3_sub(B, A), v3_sub(C, A)));
+                nrm[a] = shaped ? v3_load(sh_n[a]) : sphere_normal(s, c, r, &cd[a]);
+                peff[a] = v3_load(cd[a].p);
+                if (ns > 0) { /* a shared patch: the contact point is the weighted mean of its minima */
+                    double wsum = 1.0;
+                    for (int j = m; j < m + ns; j++)
+                        if (cd[j].patch == a)
+                            peff[a] = v3_axpy(cd[j].w, v3_load(cd[j].p), peff[a]), wsum += cd[j].w;
+                    if (wsum > 1.0) {
+                        peff[a] = v3_scale(peff[a], 1.0 / wsum);
+                        vec3 l = v3_sub(c, peff[a]);
+                        double ll = v3_norm(l);
+                        if (ll > 1e-12 * r)
+                            nrm[a] = v3_scale(l, 1.0 / ll);
+                    }
                 }
-                /* history slot: the used one with the closest normal */
+                /* history slot: the used one with the closest normal (keyed
+                 * by grain and patch, not by triangle: the spring survives
+                 * the contact point crossing triangle edges) */
                 int best = -1;
-                double bd = 0.7;
+                double bd = DEM_SURF_PATCH_COS;
                 for (int k = 0; k < DEM_SURF_SLOTS; k++) {
                     const double *h = hs + k * DEM_SURF_SLOT_SIZE;
                     if (taken[k] || h[6] == 0.0)
@@ -622,12 +808,28 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             vec3 vi = v3(g->vx[i], g->vy[i], g->vz[i]), wi = v3(g->wx[i], g->wy[i], g->wz[i]);
             vec3 fsum = v3(0, 0, 0), tsum = v3(0, 0, 0);
             for (int a = 0; a < m; a++) {
-                const int *tn = s->tri + 3 * cd[a].tri;
-                const double *bw = cd[a].bary;
+                /* the triangles carrying the contact: its own and, in a
+                 * shared patch, those of its shallower minima, weights
+                 * normalised */
+                double wsum = 1.0;
+                for (int j = m; j < m + ns; j++)
+                    if (cd[j].patch == a)
+                        wsum += cd[j].w;
                 vec3 vs = v3(0, 0, 0);
-                for (int k = 0; k < 3; k++)
-                    vs = v3_axpy(bw[k], v3_load(s->v + 3 * tn[k]), vs);
-                vec3 p = v3_load(cd[a].p);
+                double inv_ms = 0.0;
+                for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
+                    if (j != a && cd[j].patch != a)
+                        continue;
+                    const int *tn = s->tri + 3 * cd[j].tri;
+                    double wj = (j == a ? 1.0 : cd[j].w) / wsum;
+                    for (int k = 0; k < 3; k++) {
+                        double bk = wj * cd[j].bary[k];
+                        vs = v3_axpy(bk, v3_load(s->v + 3 * tn[k]), vs);
+                        if (s->inv_mass)
+                            inv_ms += bk * bk * s->inv_mass[tn[k]];
+                    }
+                }
+                vec3 p = peff[a];
                 vec3 lever = v3_sub(p, c);
                 vec3 vrel = v3_sub(v3_add(vi, v3_cross(wi, lever)), vs);
                 double xi_tmp[3] = {0, 0, 0};
@@ -637,13 +839,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                  * is 1 / sum(w_k^2 / m_k). With the grain's mass alone the
                  * dashpot over-damps light FE nodes and the explicit exchange
                  * goes unstable (c dt / m_node > 2). */
-                double m_pair = m_i;
-                if (s->inv_mass) {
-                    double inv_ms = 0.0;
-                    for (int k = 0; k < 3; k++)
-                        inv_ms += bw[k] * bw[k] * s->inv_mass[tn[k]];
-                    m_pair = 1.0 / (1.0 / m_i + inv_ms);
-                }
+                double m_pair = s->inv_mass ? 1.0 / (1.0 / m_i + inv_ms) : m_i;
                 double fn;
                 double delta = shaped ? sh_depth[a] : r - sqrt(cd[a].d2), Rc = shaped ? sh_r[a] : r;
                 vec3 F = dem_hm_force(cf, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
@@ -654,13 +850,21 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 fsum = v3_add(fsum, F);
                 tsum = v3_add(tsum, v3_cross(lever, F));
                 tsum = v3_add(tsum, dem_rolling_torque(cf, Rc, fn, wi, 1.0 / g->inv_i[i], dt));
-                /* reaction on the surface, to the nodes by barycentric weights (eq. 42) */
+                /* reaction on the surface, to the nodes by barycentric weights
+                 * (eq. 42), times the shares in a shared patch: the contact
+                 * point is the same weighted mean, so force and moment balance */
                 vec3 Fs = v3_scale(F, -1.0);
-                for (int k = 0; k < 3; k++) {
-                    double *f = nf + 3 * tn[k];
-                    f[0] += bw[k] * Fs.x;
-                    f[1] += bw[k] * Fs.y;
-                    f[2] += bw[k] * Fs.z;
+                for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
+                    if (j != a && cd[j].patch != a)
+                        continue;
+                    const int *tn = s->tri + 3 * cd[j].tri;
+                    double wj = (j == a ? 1.0 : cd[j].w) / wsum;
+                    for (int k = 0; k < 3; k++) {
+                        double bk = wj * cd[j].bary[k], *f = nf + 3 * tn[k];
+                        f[0] += bk * Fs.x;
+                        f[1] += bk * Fs.y;
+                        f[2] += bk * Fs.z;
+                    }
                 }
                 v3_store(tot->force, v3_add(v3_load(tot->force), Fs));
                 v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_cross(v3_sub(p, ref), Fs)));
@@ -695,9 +899,19 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         s->tot.contacts += s->ttot[t].contacts;
         s->tot.max_overlap = fmax(s->tot.max_overlap, s->ttot[t].max_overlap);
     }
+    for (int t = 0; t < nt; t++) {
+        const surf_scratch *sc = &s->scratch[t];
+        if (sc->nomem)
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory growing the surface candidate buffer beyond %d",
+                           w->step, sc->cap);
+        if (sc->grew_grain >= 0 && sc->cap > s->cand_cap_logged) {
+            s->cand_cap_logged = sc->cap;
+            cm_log_info("step %ld: grain %d touches more than %d surface triangles: candidate buffer grown to %d",
+                        w->step, g->id[sc->grew_grain], sc->cap / 2, sc->cap);
+        }
+    }
     if (overflow_slot >= 0)
-        return cm_fail(err, CM_ERR_RANGE,
-                       "step %ld: grain %d touches more than %d surface triangles (mesh much finer than the grain)",
-                       w->step, g->id[overflow_slot], DEM_SURF_MAX_CAND);
+        return cm_fail(err, CM_ERR_RANGE, "step %ld: grain %d: surface tree deeper than the search stack (64)", w->step,
+                       g->id[overflow_slot]);
     return CM_OK;
 }

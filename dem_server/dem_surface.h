@@ -23,8 +23,21 @@ typedef struct dem_bvh_node {
  * crossing a triangle edge. */
 #define DEM_SURF_SLOTS 4
 #define DEM_SURF_SLOT_SIZE 7 /* xi[3], n[3], used */
-/* Candidate triangles per grain (overflow is reported as an error). */
-#define DEM_SURF_MAX_CAND 64
+/* Candidate triangles per grain: the per-thread buffers start at this size
+ * and double (logged) when a grain meets more triangles, e.g. a large grain
+ * on a fine FE mesh. */
+#define DEM_SURF_CAND_INIT 64
+/* Two contacts of a grain with the surface are one when their normals are
+ * within 45° (cos > 0.7) and, for spheres, the triangles between them all
+ * touch the grain: a dent is one contact, a lug's root two. The same angle
+ * matches a contact to its tangential history slot. */
+#define DEM_SURF_PATCH_COS 0.7
+/* The patch's shallower minima within this fraction of its overlap share
+ * its reaction (linearly fading to none): a soft FE surface loaded on one
+ * triangle of an even dent otherwise sees the load jump between its facets. */
+#define DEM_SURF_SHARE 0.1
+
+struct dem_surf_scratch;
 
 typedef struct dem_surface {
     int n_nodes, n_tris, material;
@@ -41,7 +54,8 @@ typedef struct dem_surface {
     int n_threads;
     double *tnode_f;          /* (n_threads - 1) * 3 n_nodes */
     dem_surface_total *ttot;  /* n_threads */
-    int overflow_grain;       /* id of a grain with too many candidates, or -1 */
+    struct dem_surf_scratch *scratch; /* n_threads candidate buffers (dem_surface.c) */
+    int cand_cap_logged;      /* largest candidate buffer size already logged */
 } dem_surface;
 
 /* Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision

@@ -369,6 +369,349 @@ static int plate_sinkage(void)
     return 0;
 }
 
+/* ---- dents, corners and fine meshes (issue 16) --------------------------
+ * A steel grain (R 10 mm) on a rubber surface (E 10 MPa, ν 0.45), the
+ * issue's case, with the surface held rigid: the DEM contact alone. */
+static const double RS = 0.010;
+
+static dem_world *steel_rubber_world(double dt, double mu, int max_grains, int threads)
+{
+    dem_material m[2] = {
+        {.density = 7800.0, .young = 2.1e11, .poisson = 0.3, .restitution = 1.0, .friction = mu},
+        {.density = 1100.0, .young = 1.0e7, .poisson = 0.45, .restitution = 1.0, .friction = mu},
+    };
+    return test_world(m, 2, dt, max_grains, NULL, threads);
+}
+
+static double e_star_steel_rubber(void)
+{
+    return 1.0 / ((1.0 - 0.09) / 2.1e11 + (1.0 - 0.45 * 0.45) / 1.0e7);
+}
+
+/* Plane z = 0 of nx x nx squares of side s centred on the origin, with a
+ * spherical dent of radius rd and depth hd centred on the origin (nodes
+ * inside the dent's rim lowered onto the sphere). */
+static int dented_surface(dem_world *w, int nx, double s, double rd, double hd)
+{
+    int nn = (nx + 1) * (nx + 1);
+    double *x = malloc(sizeof(double) * 3 * nn);
+    int *t = malloc(sizeof(int) * 6 * nx * nx);
+    if (!x || !t)
+        return 1;
+    test_plane_mesh(nx, nx, s, -nx * s / 2, -nx * s / 2, 0.0, x, t);
+    for (int i = 0; i < nn; i++) {
+        double *p = x + 3 * i, r2 = p[0] * p[0] + p[1] * p[1];
+        double z = -hd + rd - sqrt(fmax(rd * rd - r2, 0.0));
+        if (z < 0.0)
+            p[2] = z;
+    }
+    cm_error err = {0};
+    int rc = dem_surface_set(w, nn, x, 2 * nx * nx, t, 1, &err);
+    if (rc)
+        fprintf(stderr, "%s\n", err.msg);
+    free(x), free(t);
+    return rc;
+}
+
+typedef struct impact_out {
+    double e_in, e_out, fmax, tc;
+    int max_contacts, steps;
+} impact_out;
+
+/* Launches grain 0 from x0 with v0 and steps until it has left the surface
+ * (in contact once, none now): peak force, contact time, energies (mass
+ * and inertia from the grain, I = 2/5 m r²). */
+static int run_impact(dem_world *w, const double x0[3], const double v0[3], impact_out *o)
+{
+    cm_error err = {0};
+    if (dem_grain_add(w, x0, RS, 0, NULL, &err)) {
+        fprintf(stderr, "%s\n", err.msg);
+        return 1;
+    }
+    dem_grain_set(w, 0, NULL, v0, NULL);
+    dem_grain_state g;
+    dem_grain_get(w, 0, &g);
+    o->e_in = 0.5 * g.mass * (v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2]);
+    o->fmax = 0, o->max_contacts = 0, o->tc = 0;
+    int seen = 0, n_in = 0;
+    for (o->steps = 0; o->steps < 200000; o->steps++) {
+        if (dem_step(w, &err)) {
+            fprintf(stderr, "step %d: %s\n", o->steps, err.msg);
+            return 1;
+        }
+        dem_surface_total tot;
+        dem_surface_totals(w, &tot);
+        dem_grain_get(w, 0, &g);
+        o->fmax = fmax(o->fmax, sqrt(g.f[0] * g.f[0] + g.f[1] * g.f[1] + g.f[2] * g.f[2]));
+        if (tot.contacts > o->max_contacts)
+            o->max_contacts = tot.contacts;
+        if (tot.contacts > 0)
+            seen = 1, n_in++;
+        else if (seen)
+            break;
+    }
+    dem_grain_get(w, 0, &g);
+    double iner = 0.4 * g.mass * RS * RS;
+    o->e_out = 0.5 * g.mass * (g.v[0] * g.v[0] + g.v[1] * g.v[1] + g.v[2] * g.v[2]) +
+               0.5 * iner * (g.w[0] * g.w[0] + g.w[1] * g.w[1] + g.w[2] * g.w[2]);
+    return seen ? 0 : 1;
+}
+
+/* An elastic grain (no damping, no friction) dropped into a dent of a rigid
+ * triangulated surface leaves with the energy it brought, wherever it lands
+ * in the dent: the dent is one contact (a local distance minimum on each of
+ * its facets used to count as a full contact each). The dent (radius
+ * 1.25 R, depth 0.15 R, facets of R/8) is the shape a soft tread takes under
+ * a grain; the impact overlap (5 % of R) makes the grain meet the whole dent. */
+static int dented_impact_energy(void)
+{
+    const double hd = 0.15 * RS, s = RS / 8.0;
+    double starts[][4] = {/* x, y, vx, vy */
+                          {0, 0, 0, 0},         {0.3 * s, 0.2 * s, 0.05, 0.02}, {0.5 * s, 0, -0.1, 0},
+                          {s, s, 0.0, 0.08},    {0.2 * RS, 0.1 * RS, -0.15, -0.05}};
+    double worst = 0;
+    int worst_contacts = 0;
+    for (size_t k = 0; k < sizeof starts / sizeof starts[0]; k++) {
+        dem_world *w = steel_rubber_world(3e-6, 0.0, 4, 1);
+        ENSURE(w);
+        ENSURE(dented_surface(w, 24, s, 1.25 * RS, hd) == 0);
+        /* from just above the plane z = 0: it lands in the dent */
+        double x0[3] = {starts[k][0], starts[k][1], RS + 1e-6}, v0[3] = {starts[k][2], starts[k][3], -0.5};
+        impact_out o;
+        ENSURE(run_impact(w, x0, v0, &o) == 0);
+        double err = o.e_out / o.e_in - 1.0;
+        printf("dented impact from (%.2f, %.2f) s: E_out/E_in - 1 = %+.2e, F_max %.2f N, up to %d contacts\n",
+               starts[k][0] / s, starts[k][1] / s, err, o.fmax, o.max_contacts);
+        worst = fmax(worst, fabs(err));
+        worst_contacts = o.max_contacts > worst_contacts ? o.max_contacts : worst_contacts;
+        dem_world_destroy(&w);
+    }
+    printf("dented impact: worst energy error %.2e, at most %d contacts\n", worst, worst_contacts);
+    ENSURE(worst < 0.02);
+    ENSURE(worst_contacts == 1);
+    return 0;
+}
+
+/* A grain dropped on a finely meshed flat surface (facets R/25: some 200
+ * triangles under the grain at the peak, more than the old fixed cap of
+ * 64) feels the same peak force whether it lands on a vertex, an edge or
+ * inside a face, and that is Hertz's for a steel sphere on a rubber
+ * half-space (the surface's material). */
+static int fine_mesh_landing(void)
+{
+    const double s = RS / 25.0, v = 0.5;
+    const int nx = 60; /* ±1.2 R */
+    dem_material steel = {.density = 7800.0, .young = 2.1e11, .poisson = 0.3, .restitution = 1.0};
+    double m = steel.density * 4.0 / 3.0 * M_PI * RS * RS * RS;
+    hertz_ref h = hertz_closed_form(e_star_steel_rubber(), RS, m, v);
+    double land[][2] = {{0, 0}, {0.5 * s, 0}, {s / 3.0, s / 5.0}, {0.5 * s, 0.5 * s}};
+    const char *what[] = {"vertex", "edge", "face", "diagonal"};
+    double f[4], worst = 0;
+    for (int k = 0; k < 4; k++) {
+        dem_world *w = steel_rubber_world(h.tc / 1000.0, 0.0, 4, 1);
+        ENSURE(w);
+        ENSURE(dented_surface(w, nx, s, 1.0, 0.0) == 0);
+        double x0[3] = {land[k][0], land[k][1], RS + 1e-7}, v0[3] = {0, 0, -v};
+        impact_out o;
+        ENSURE(run_impact(w, x0, v0, &o) == 0);
+        f[k] = o.fmax;
+        printf("fine mesh, landing on a %-8s: F_max %.4f N (Hertz %.4f N, %+.2e), contact time %.4f ms (%d steps)\n",
+               what[k], o.fmax, h.fmax, o.fmax / h.fmax - 1, o.steps * h.tc / 1000.0 * 1e3, o.steps);
+        ENSURE(o.max_contacts == 1);
+        worst = fmax(worst, fabs(o.fmax / h.fmax - 1));
+        dem_world_destroy(&w);
+    }
+    for (int k = 1; k < 4; k++)
+        ENSURE_REL(f[k], f[0], 0.01);
+    ENSURE(worst < 0.01);
+    return 0;
+}
+
+/* Two planes meeting along the y axis: the floor z = 0 (x > 0) and a
+ * second plane through the axis at angle `deg` to it (x < 0), as triangles
+ * sharing the fold's nodes. */
+static int folded_surface(dem_world *w, double deg, double s)
+{
+    const int nx = 16, ny = 8;
+    int nn = (nx + 1) * (ny + 1);
+    double *x = malloc(sizeof(double) * 3 * nn);
+    int *t = malloc(sizeof(int) * 6 * nx * ny);
+    if (!x || !t)
+        return 1;
+    test_plane_mesh(nx, ny, s, -nx * s / 2, -ny * s / 2, 0.0, x, t);
+    double a = deg * M_PI / 180.0;
+    for (int i = 0; i < nn; i++) { /* x < 0 rotated about the y axis, up into z > 0 */
+        double *p = x + 3 * i;
+        if (p[0] < 0.0) {
+            double l = -p[0];
+            p[0] = -l * cos(a), p[2] = l * sin(a);
+        }
+    }
+    cm_error err = {0};
+    int rc = dem_surface_set(w, nn, x, 2 * nx * ny, t, 1, &err);
+    if (rc)
+        fprintf(stderr, "%s\n", err.msg);
+    free(x), free(t);
+    return rc;
+}
+
+/* A real concave corner keeps one contact per face: a grain pressed into
+ * the corner of a floor and a wall (90°), or of a floor and a 60° flank, by
+ * the same overlap on both feels the Hertz force of each face. A shallow
+ * fold (10°) is one surface patch: one contact, the deeper face's. */
+static int concave_corner_contacts(void)
+{
+    const double delta = 0.01 * RS, s = RS / 3.0;
+    double fh = 4.0 / 3.0 * e_star_steel_rubber() * sqrt(RS) * pow(delta, 1.5);
+    double angles[] = {90.0, 120.0, 170.0};
+    int expect[] = {2, 2, 1};
+    for (int k = 0; k < 3; k++) {
+        dem_world *w = steel_rubber_world(1e-6, 0.0, 4, 1);
+        ENSURE(w);
+        /* the fold's flank at angle (180 - opening) from the floor */
+        double flank = 180.0 - angles[k], a = flank * M_PI / 180.0;
+        ENSURE(folded_surface(w, flank, s) == 0);
+        /* centre at distance R - delta from both planes, on the bisector of
+         * the opening: x = d tan(a/2) */
+        double d = RS - delta, x[3] = {d * tan(0.5 * a), 0.0, d};
+        cm_error err = {0};
+        ENSURE(dem_grain_add(w, x, RS, 0, NULL, &err) == 0);
+        ENSURE(dem_step_surface(w, &err) == 0);
+        dem_surface_total tot;
+        dem_surface_totals(w, &tot);
+        dem_grain_state g;
+        dem_grain_get(w, 0, &g);
+        /* expected: each face pushes with the Hertz force along its normal */
+        double n1[3] = {0, 0, 1}, n2[3] = {sin(a), 0, cos(a)};
+        double fe[3];
+        for (int c = 0; c < 3; c++)
+            fe[c] = expect[k] == 2 ? fh * (n1[c] + n2[c]) : fh * n1[c];
+        printf("fold opening %.0f°: %d contacts, force (%.4f %.4f %.4f) N, expected (%.4f %.4f %.4f)\n", angles[k],
+               tot.contacts, g.f[0], g.f[1], g.f[2], fe[0], fe[1], fe[2]);
+        ENSURE_MSG(tot.contacts == expect[k], "opening %g°: %d contacts", angles[k], tot.contacts);
+        if (expect[k] == 2)
+            for (int c = 0; c < 3; c++)
+                ENSURE_NEAR(g.f[c], fe[c], 1e-9 * fh);
+        else /* one contact with the Hertz force of the overlap */
+            ENSURE_REL(sqrt(g.f[0] * g.f[0] + g.f[1] * g.f[1] + g.f[2] * g.f[2]), fh, 1e-9);
+        dem_world_destroy(&w);
+    }
+    return 0;
+}
+
+/* On a dented surface with friction, grains moving and spinning in and
+ * around the dent: the node forces balance the grains' forces and moments
+ * (about the origin: sum x_k × f_k = -sum (c × F + T)) to round-off. */
+static int dent_node_balance(void)
+{
+    dem_world *w = steel_rubber_world(1e-6, 0.5, 16, 2);
+    ENSURE(w);
+    const double hd = 0.15 * RS, s = RS / 8.0;
+    const int nx = 48;
+    ENSURE(dented_surface(w, nx, s, 1.25 * RS, hd) == 0);
+    cm_error err = {0};
+    double pos[][3] = {{0.001, -0.0005, -hd + 0.97 * RS}, {0.021, 0.0, 0.97 * RS}, {-0.005, 0.02, 0.99 * RS},
+                       {-0.02, -0.02, 0.98 * RS}};
+    for (int j = 0; j < 4; j++) {
+        ENSURE(dem_grain_add(w, pos[j], RS, 0, NULL, &err) == 0);
+        double v[3] = {0.1 * j - 0.1, 0.05, -0.2}, om[3] = {3, -2, 1 + j};
+        dem_grain_set(w, j, NULL, v, om);
+    }
+    double fmag = 0, F[3] = {0, 0, 0}, M[3] = {0, 0, 0};
+    for (int st = 0; st < 40; st++) { /* a few steps: the tangential springs load */
+        ENSURE(dem_step_surface(w, &err) == 0);
+        if (st < 39)
+            ENSURE(dem_step_grains(w, &err) == 0);
+    }
+    dem_surface_total tot;
+    dem_surface_totals(w, &tot);
+    const double *nf = dem_surface_node_forces(w);
+    int nn = (nx + 1) * (nx + 1);
+    /* node positions: rebuild the mesh the same way */
+    double *x = malloc(sizeof(double) * 3 * nn);
+    int *t = malloc(sizeof(int) * 6 * nx * nx);
+    ENSURE(x && t);
+    test_plane_mesh(nx, nx, s, -nx * s / 2, -nx * s / 2, 0.0, x, t);
+    for (int i = 0; i < nn; i++) {
+        double *p = x + 3 * i, r2 = p[0] * p[0] + p[1] * p[1], rd = 1.25 * RS;
+        double z = -hd + rd - sqrt(fmax(rd * rd - r2, 0.0));
+        if (z < 0.0)
+            p[2] = z;
+        const double *f = nf + 3 * i;
+        F[0] += f[0], F[1] += f[1], F[2] += f[2];
+        M[0] += p[1] * f[2] - p[2] * f[1];
+        M[1] += p[2] * f[0] - p[0] * f[2];
+        M[2] += p[0] * f[1] - p[1] * f[0];
+    }
+    double G[3] = {0, 0, 0}, GM[3] = {0, 0, 0};
+    for (int j = 0; j < 4; j++) { /* the grains have not moved since the surface step */
+        dem_grain_state g;
+        dem_grain_get(w, j, &g);
+        for (int k = 0; k < 3; k++)
+            G[k] += g.f[k], GM[k] += g.t[k];
+        GM[0] += g.x[1] * g.f[2] - g.x[2] * g.f[1];
+        GM[1] += g.x[2] * g.f[0] - g.x[0] * g.f[2];
+        GM[2] += g.x[0] * g.f[1] - g.x[1] * g.f[0];
+        fmag += sqrt(g.f[0] * g.f[0] + g.f[1] * g.f[1] + g.f[2] * g.f[2]);
+    }
+    free(x), free(t);
+    printf("dent node balance: %d contacts, |F| sum %.4g N, node resultant (%.6g %.6g %.6g) vs grains (%.6g %.6g %.6g), "
+           "moment (%.6g %.6g %.6g) vs (%.6g %.6g %.6g)\n",
+           tot.contacts, fmag, F[0], F[1], F[2], -G[0], -G[1], -G[2], M[0], M[1], M[2], -GM[0], -GM[1], -GM[2]);
+    for (int k = 0; k < 3; k++) {
+        ENSURE_NEAR(F[k], -G[k], 1e-12 * fmag);
+        ENSURE_NEAR(M[k], -GM[k], 1e-12 * fmag * RS);
+    }
+    ENSURE(tot.contacts >= 3);
+    return 0;
+}
+
+/* A grain held at a constant overlap slides along a dent (moved on an arc
+ * about the dent's centre, 0.3 rad: its contact point travels 3.75 mm,
+ * three facets):
+ * the tangential spring is keyed by grain and patch, not by triangle, so
+ * the friction force stays at the Coulomb limit throughout (a reset would
+ * drop it to the tiny elastic increment of one step). */
+static int dent_slide_keeps_history(void)
+{
+    const double hd = 0.15 * RS, s = RS / 8.0, rd = 1.25 * RS, delta = 0.02 * RS, mu = 0.5;
+    dem_world *w = steel_rubber_world(1e-6, mu, 4, 1);
+    ENSURE(w);
+    ENSURE(dented_surface(w, 24, s, rd, hd) == 0);
+    const double oz = rd - hd, arm = rd - RS + delta, phi_end = 0.3, dt = 1e-6;
+    const int steps = 3000;
+    const double dphi = phi_end / steps;
+    cm_error err = {0};
+    double x[3] = {0, 0, oz - arm};
+    ENSURE(dem_grain_add(w, x, RS, 0, NULL, &err) == 0);
+    double worst = INFINITY, fn_mean = 0;
+    int counted = 0;
+    for (int st = 0; st <= steps; st++) {
+        double phi = st * dphi;
+        double c[3] = {arm * sin(phi), 0, oz - arm * cos(phi)};
+        double v[3] = {arm * cos(phi) * dphi / dt, 0, arm * sin(phi) * dphi / dt};
+        ENSURE(dem_grain_set(w, 0, c, v, NULL) == 0);
+        ENSURE(dem_step_surface(w, &err) == 0);
+        dem_grain_state g;
+        dem_grain_get(w, 0, &g);
+        double n[3] = {-sin(phi), 0, cos(phi)}; /* from the bowl towards its centre */
+        double fn = g.f[0] * n[0] + g.f[1] * n[1] + g.f[2] * n[2], ft[3];
+        for (int k = 0; k < 3; k++)
+            ft[k] = g.f[k] - fn * n[k];
+        double ftm = sqrt(ft[0] * ft[0] + ft[1] * ft[1] + ft[2] * ft[2]);
+        if (st > steps / 10) {
+            worst = fmin(worst, ftm / (mu * fn));
+            fn_mean += fn, counted++;
+        }
+    }
+    printf("dent slide: F_n %.3f N, friction / (mu F_n) at least %.3f (the split uses the dent's radial normal, "
+           "not the facets': a reset would give %.4f)\n",
+           fn_mean / counted, worst, 2.5e4 * arm * dphi / (mu * fn_mean / counted));
+    ENSURE(worst > 0.5);
+    dem_world_destroy(&w);
+    return 0;
+}
+
 /* Error paths name the culprit. */
 static int errors_name_culprit(void)
 {
@@ -404,6 +747,11 @@ static const test_case tests[] = {
     {"rolling_across_edges", rolling_across_edges},
     {"node_force_balance", node_force_balance},
     {"surface_update_refit", surface_update_refit},
+    {"dented_impact_energy", dented_impact_energy},
+    {"fine_mesh_landing", fine_mesh_landing},
+    {"concave_corner_contacts", concave_corner_contacts},
+    {"dent_node_balance", dent_node_balance},
+    {"dent_slide_keeps_history", dent_slide_keeps_history},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -317,7 +317,7 @@ static int tire_exchange_every_two(void)
     char scene[200], cmd[800];
     snprintf(scene, sizeof scene, "/tmp/demfem-coupled-%d-every2.cfg", (int)getpid());
     snprintf(cmd, sizeof cmd,
-             "sed 's/coupling = { dt = 1.0e-5; exchange_every = 1; };/coupling = { dt = 5.0e-6; exchange_every = 2; };/' "
+             "sed 's/coupling = { dt = 1.0e-5; exchange_every = 1;/coupling = { dt = 5.0e-6; exchange_every = 2;/' "
              "%stire_small.cfg > %s && grep -q 'exchange_every = 2' %s",
              SCENES, scene, scene);
     ENSURE(system(cmd) == 0);

@@ -3,11 +3,13 @@
  * itself, with a floor from the interface's energy scale.
  *
  * work_guard_relative: the guard's rule on numbers (no processes).
- * tire_drift_stopped: tire_small with an exchange interval 12x too long
- *   (coupling.dt 1.2e-4 s; fem.dt 2e-5 s sub-cycled) ran to the end with exit
- *   0 before, the two sides' interface work 66 % apart (-1.34 J DEM, -0.46 J
- *   FEM: never above the old absolute 1 J gap); it must stop, naming the
- *   cause and the key to change.
+ * tire_drift_stopped: tire_small with an exchange interval 14x too long
+ *   (coupling.dt 1.4e-4 s; fem.dt 2e-5 s sub-cycled). With one contact per
+ *   grain and surface patch (dem_surface.c) the small tire still drifts at
+ *   1.3e-4 s and beyond (at 1.2e-4 s it now ends 2.1 % apart; with the old
+ *   multiple contacts it ended 66 % apart there and exited 0): the sides'
+ *   work parts by 0.05 J at t = 0.10 s, never near the old absolute 1 J gap;
+ *   it must stop, naming the cause and the key to change.
  * tire_moderate_interval_passes: the same at coupling.dt 5e-5 s, where the
  *   two sides agree within 0.13 %: the guard must not fire.
  * peer_nan_force_named: fem_server against this test acting as the DEM side,
@@ -90,7 +92,7 @@ static char *slurp(const char *path)
 static int tire_drift_stopped(void)
 {
     char log[300];
-    int status = run_tire_small("drift", "--set coupling.dt=1.2e-4 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
+    int status = run_tire_small("drift", "--set coupling.dt=1.4e-4 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
                                 log, sizeof log);
     const char *text = slurp(log);
     ENSURE(text != NULL);

@@ -1,9 +1,15 @@
-/* The world and its time step, read top-down as a pipeline:
- *   dem_step_surface: clear forces -> gravity -> walls -> triangle surface
- *   dem_step_grains:  grain–grain (neighbour list) -> merge thread buffers
- *                     -> Verlet (eqs. 4–5), ω and quaternion -> neighbour
- *                     list rebuild when a grain moved more than skin/2
- * Each phase is timed into w->prof. */
+/* The world and its time step. One step is a pipeline of named stages, each
+ * timed into w->prof (dem_profile):
+ *   surface    clear forces -> gravity -> walls -> triangle surface     (dem_step_surface)
+ *   pairs      grain–grain narrow phase over the neighbour list; each     (dem_step_grains)
+ *              pair's force and torques stored in pair_f, nothing summed
+ *   gather     per grain, its pairs' forces added in pair-list order
+ *              (adj_*): the sums do not depend on the thread count
+ *   integrate  Verlet (eqs. 4–5), ω and quaternion, largest displacement
+ *   rebuild    neighbour grid, re-sort and pair list when a grain moved
+ *              more than skin/2 (or the grains changed)
+ * In the coupled loop (dem_coupled.c) the exchange sits between surface and
+ * pairs, so that pairs, gather and integrate overlap the FEM's step. */
 #include "dem_world.h"
 
 #include <math.h>
@@ -120,6 +126,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->inertia = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
     g->angmom = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
     w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
+    w->adj_start = xcalloc((size_t)cap + 1, sizeof(int), &bad);
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)
@@ -163,6 +170,10 @@ void dem_world_destroy(dem_world **wp)
     free(w->cell_items);
     free(w->pi);
     free(w->pj);
+    free(w->pair_f);
+    free(w->pair_on);
+    free(w->adj_start);
+    free(w->adj_ref);
     free(w->hist_val[0]);
     free(w->hist_val[1]);
     dem_hash_free(&w->hist[0]);
@@ -645,7 +656,7 @@ int dem_surface_update(dem_world *w, const double *node_x, const double *node_v,
         memset(s->v, 0, (size_t)n3 * sizeof *s->v);
     double t0 = cm_now();
     dem_surface_refit(s);
-    w->prof.exchange += cm_now() - t0;
+    w->prof.surface += cm_now() - t0;
     return CM_OK;
 }
 
@@ -857,6 +868,46 @@ static int grid_build(dem_world *w, grid_dims *gd)
     return CM_OK;
 }
 
+/* Each grain's pairs in list order (adj_start, adj_ref) and room for the
+ * pair forces. Pairs are listed by their first grain i (ascending), so a
+ * grain's list holds first the pairs where it is j, then those where it is i:
+ * the order in which a serial loop over the pairs would add them. */
+static int pair_adjacency(dem_world *w, cm_error *err)
+{
+    const int n = w->g.n, np = w->n_active_pairs;
+    if (np > w->pair_buf_cap) {
+        int cap = w->pair_buf_cap ? w->pair_buf_cap : 1024;
+        while (cap < np)
+            cap *= 2;
+        double *f = realloc(w->pair_f, (size_t)cap * DEM_PAIR_F * sizeof *f);
+        if (f)
+            w->pair_f = f;
+        unsigned char *on = realloc(w->pair_on, (size_t)cap);
+        if (on)
+            w->pair_on = on;
+        int *ref = realloc(w->adj_ref, 2 * (size_t)cap * sizeof *ref);
+        if (ref)
+            w->adj_ref = ref;
+        if (!f || !on || !ref)
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the forces of %d pairs", w->step, np);
+        w->pair_buf_cap = cap;
+    }
+    int *start = w->adj_start, *ref = w->adj_ref;
+    memset(start, 0, ((size_t)n + 1) * sizeof *start);
+    for (int p = 0; p < np; p++)
+        start[w->pi[p] + 1]++, start[w->pj[p] + 1]++;
+    for (int i = 0; i < n; i++)
+        start[i + 1] += start[i];
+    int *pos = (int *)w->scratch; /* cursor (cap ints); scratch is free here */
+    memcpy(pos, start, (size_t)n * sizeof *pos);
+    for (int p = 0; p < np; p++) {
+        ref[pos[w->pi[p]]++] = 2 * p;
+        ref[pos[w->pj[p]]++] = 2 * p + 1;
+    }
+    w->adj_valid = 1;
+    return CM_OK;
+}
+
 static int neighbour_rebuild(dem_world *w, cm_error *err)
 {
     dem_grains *g = &w->g;
@@ -948,7 +999,7 @@ static int neighbour_rebuild(dem_world *w, cm_error *err)
     w->rebuild_count++;
     w->prof.rebuilds++;
     w->need_rebuild = 0;
-    return CM_OK;
+    return pair_adjacency(w, err);
 }
 
 int dem_world_prepare(dem_world *w, cm_error *err)
@@ -974,6 +1025,7 @@ int dem_world_prepare(dem_world *w, cm_error *err)
     if (rc)
         return rc;
     w->need_rebuild = 1;
+    w->adj_valid = 0; /* a checkpoint read after this replaces the pair list */
     w->prepared = 1;
     return CM_OK;
 }
@@ -1085,14 +1137,14 @@ int dem_step_surface(dem_world *w, cm_error *err)
     int rc = CM_OK;
     if (w->surf)
         rc = dem_surface_contacts(w, err);
-    w->prof.exchange += cm_now() - t0;
+    w->prof.surface += cm_now() - t0;
     return rc;
 }
 
-/* Grain–grain contact of pair p (slots i < j); force and torques written to
- * the arrays f (6 blocks of cap: fx fy fz tx ty tz). Returns 1 in contact. */
-static inline __attribute__((always_inline)) int pair_contact(dem_world *w, int p, double *fx, double *fy, double *fz, double *tx, double *ty,
-                               double *tz)
+/* Grain–grain contact of pair p (slots i < j): the force on i and the
+ * torques on i and j into out[DEM_PAIR_F]. Returns 1 in contact; out is not
+ * written otherwise. */
+static inline __attribute__((always_inline)) int pair_force(dem_world *w, int p, double *restrict out)
 {
     dem_grains *g = &w->g;
     int i = w->pi[p], j = w->pj[p];
@@ -1127,36 +1179,77 @@ static inline __attribute__((always_inline)) int pair_contact(dem_world *w, int 
         Ti = v3_add(Ti, tr);
         Tj = v3_sub(Tj, tr);
     }
-    fx[i] += F.x, fy[i] += F.y, fz[i] += F.z;
-    fx[j] -= F.x, fy[j] -= F.y, fz[j] -= F.z;
-    tx[i] += Ti.x, ty[i] += Ti.y, tz[i] += Ti.z;
-    tx[j] += Tj.x, ty[j] += Tj.y, tz[j] += Tj.z;
+    out[0] = F.x, out[1] = F.y, out[2] = F.z;
+    out[3] = Ti.x, out[4] = Ti.y, out[5] = Ti.z;
+    out[6] = Tj.x, out[7] = Tj.y, out[8] = Tj.z;
     return 1;
 }
 
-int dem_step_grains(dem_world *w, cm_error *err)
+/* Stage "pairs", spheres only: every active pair's force stored. Pairs are
+ * independent (each owns its spring): any split over threads gives the same
+ * numbers. Returns the contacts. */
+static int stage_pairs(dem_world *w)
 {
-    if (!w->prepared)
-        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
-    dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads, cap = g->cap;
-    const double dt = w->def.dt;
-    if (w->need_rebuild) {
-        double t0 = cm_now();
-        int rc = neighbour_rebuild(w, err);
-        w->prof.broad += cm_now() - t0;
-        if (rc)
-            return rc;
-    }
-    /* narrow phase: pairs split in nt contiguous blocks; thread t > 0
-     * accumulates into its own buffer, merged below in thread order, so the
-     * sums are the same for a given thread count */
-    double t0 = cm_now();
+    const int np = w->n_active_pairs, nt = w->n_threads;
+    double *pf = w->pair_f;
+    unsigned char *on = w->pair_on;
     int contacts = 0;
-    const int np = w->n_active_pairs;
-    const int shaped = w->n_shaped > 0;
-    if (shaped)
-        dem_shaped_pose_update(w);
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : contacts)
+#endif
+    for (int p = 0; p < np; p++) {
+        int c = pair_force(w, p, pf + (size_t)DEM_PAIR_F * p);
+        on[p] = (unsigned char)c;
+        contacts += c;
+    }
+    (void)nt;
+    return contacts;
+}
+
+/* Stage "gather": each grain adds its touching pairs' forces and torques in
+ * pair-list order (adj_*), onto what the surface stage left (gravity, walls,
+ * triangles): the same additions in the same order as a serial loop over
+ * the pairs, for any number of threads. */
+static void stage_gather(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    const double *pf = w->pair_f;
+    const unsigned char *on = w->pair_on;
+    const int *start = w->adj_start, *ref = w->adj_ref;
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+#endif
+    for (int i = 0; i < n; i++) {
+        double fx = g->fx[i], fy = g->fy[i], fz = g->fz[i], tx = g->tx[i], ty = g->ty[i], tz = g->tz[i];
+        for (int k = start[i]; k < start[i + 1]; k++) {
+            int r = ref[k], p = r >> 1;
+            if (!on[p])
+                continue;
+            const double *f = pf + (size_t)DEM_PAIR_F * p;
+            if (r & 1) { /* the pair's j: -F, its own torque */
+                fx -= f[0], fy -= f[1], fz -= f[2];
+                tx += f[6], ty += f[7], tz += f[8];
+            } else {
+                fx += f[0], fy += f[1], fz += f[2];
+                tx += f[3], ty += f[4], tz += f[5];
+            }
+        }
+        g->fx[i] = fx, g->fy[i] = fy, g->fz[i] = fz, g->tx[i] = tx, g->ty[i] = ty, g->tz[i] = tz;
+    }
+    (void)nt;
+}
+
+/* Stages "pairs" and "gather" for a world with shaped grains: the shaped
+ * contacts (dem_shape.c) add into force arrays, so each thread adds its
+ * contiguous block of pairs into its own buffer (thread 0 into the grain
+ * arrays), merged in thread order: deterministic for a given thread count. */
+static int stage_pairs_shaped(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
+    int contacts = 0;
+    dem_shaped_pose_update(w);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
@@ -1171,18 +1264,21 @@ int dem_step_grains(dem_world *w, cm_error *err)
             memset(b, 0, 6 * (size_t)cap * sizeof *b);
             fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
         }
-        if (!shaped) /* spheres only: the original loop */
-            for (int p = lo; p < hi; p++)
-                contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
-        else
-            for (int p = lo; p < hi; p++) {
-                int i = w->pi[p], j = w->pj[p];
-                if ((g->shape[i] & g->shape[j]) < 0) /* both -1: spheres */
-                    contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
-                else
-                    contacts += dem_shaped_pair(w, i, j, w->hist_val[w->hist_cur] + 3 * (size_t)p, fx, fy, fz, tx,
-                                                ty, tz);
-            }
+        for (int p = lo; p < hi; p++) {
+            int i = w->pi[p], j = w->pj[p];
+            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+            if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
+                double f[DEM_PAIR_F];
+                if (pair_force(w, p, f)) {
+                    contacts++;
+                    fx[i] += f[0], fy[i] += f[1], fz[i] += f[2];
+                    fx[j] -= f[0], fy[j] -= f[1], fz[j] -= f[2];
+                    tx[i] += f[3], ty[i] += f[4], tz[i] += f[5];
+                    tx[j] += f[6], ty[j] += f[7], tz[j] += f[8];
+                }
+            } else
+                contacts += dem_shaped_pair(w, i, j, xi, fx, fy, fz, tx, ty, tz);
+        }
 #ifdef _OPENMP
 #pragma omp barrier
 #pragma omp for schedule(static)
@@ -1194,25 +1290,31 @@ int dem_step_grains(dem_world *w, cm_error *err)
                 g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
             }
     }
-    w->contacts_gg = contacts;
-    double t1 = cm_now();
-    w->prof.narrow += t1 - t0;
+    return contacts;
+}
 
-    /* Verlet, eqs. 4–5 as predictor/corrector: v(t) = v(t-dt/2) + a(t) dt/2
-     * completes the previous step, v(t+dt/2) = v(t) + a(t) dt/2 predicts, and
-     * x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt + a dt²/2 (eq. 4). Spheres:
-     * ω integrated directly (no gyroscopic term), orientation as a unit
-     * quaternion rotated by ω dt (no Euler-angle singularity, eq. 9 avoided). */
+/* Stage "integrate": Verlet, eqs. 4–5 as predictor/corrector: v(t) =
+ * v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) = v(t) +
+ * a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt + a dt²/2
+ * (eq. 4). Spheres: ω integrated directly (no gyroscopic term), orientation
+ * as a unit quaternion rotated by ω dt (no Euler-angle singularity, eq. 9
+ * avoided). *maxd2: the largest squared displacement since the last rebuild;
+ * returns the first slot with a non-finite position, or n. */
+static int stage_integrate(dem_world *w, double *maxd2_out)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    const double dt = w->def.dt;
+    const int shaped = w->n_shaped > 0;
     double maxd2 = 0.0;
     int bad = n;
-    const double half = 0.5 * w->skin;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
     if (shaped)
         for (int i = 0; i < n; i++)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : maxd2) reduction(min : bad)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : maxd2) reduction(min : bad)
 #endif
     for (int i = 0; i < n; i++) {
         if (g->frozen[i])
@@ -1252,7 +1354,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
          * with that L over dt from the saved orientation (NO_SQUISH,
          * dem_shape.h); omega from L at the new orientation. */
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 #endif
         for (int i = 0; i < n; i++) {
             if (g->shape[i] < 0 || g->frozen[i])
@@ -1264,16 +1366,56 @@ int dem_step_grains(dem_world *w, cm_error *err)
             g->wx[i] = om[0], g->wy[i] = om[1], g->wz[i] = om[2];
         }
     }
+    (void)nt;
+    *maxd2_out = maxd2;
+    return bad;
+}
+
+/* The rest of the step after the surface stage: rebuild (if the grains
+ * changed) -> pairs -> gather -> integrate -> rebuild if a grain moved more
+ * than skin/2. */
+int dem_step_grains(dem_world *w, cm_error *err)
+{
+    if (!w->prepared)
+        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
+    double t0 = cm_now();
+    if (w->need_rebuild || !w->adj_valid) {
+        int rc = w->need_rebuild ? neighbour_rebuild(w, err) : pair_adjacency(w, err);
+        if (rc)
+            return rc;
+        double t = cm_now();
+        w->prof.rebuild += t - t0;
+        t0 = t;
+    }
+    if (w->n_shaped > 0) {
+        w->contacts_gg = stage_pairs_shaped(w); /* gathered in it */
+        double t = cm_now();
+        w->prof.pairs += t - t0;
+        t0 = t;
+    } else {
+        w->contacts_gg = stage_pairs(w);
+        double t = cm_now();
+        w->prof.pairs += t - t0;
+        t0 = t;
+        stage_gather(w);
+        t = cm_now();
+        w->prof.gather += t - t0;
+        t0 = t;
+    }
+    double maxd2;
+    int bad = stage_integrate(w, &maxd2);
     w->step++;
-    w->time += dt;
-    double t2 = cm_now();
-    w->prof.integrate += t2 - t1;
-    if (bad < n)
+    w->time += w->def.dt;
+    w->prof.steps++;
+    double t1 = cm_now();
+    w->prof.integrate += t1 - t0;
+    if (bad < w->g.n)
         return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
-                       w->step, w->time, g->id[bad]);
+                       w->step, w->time, w->g.id[bad]);
+    const double half = 0.5 * w->skin;
     if (maxd2 > half * half) {
         int rc = neighbour_rebuild(w, err);
-        w->prof.broad += cm_now() - t2;
+        w->prof.rebuild += cm_now() - t1;
         if (rc)
             return rc;
     }

@@ -116,6 +116,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * 3, sizeof(double), &bad);
     g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
     g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
+    g->wall_near = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
     g->id = xcalloc((size_t)cap, sizeof(int), &bad);
     g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
     g->tag = xcalloc((size_t)cap, sizeof(int), &bad);
@@ -136,6 +137,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
         return cm_fail(err, CM_ERR_NOMEM, "dem_world_create: out of memory for %d grains", cap);
     }
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     *out = w;
     return CM_OK;
 }
@@ -154,6 +156,7 @@ void dem_world_destroy(dem_world **wp)
     free(g->wall_hist);
     free(g->mat);
     free(g->wall_mask);
+    free(g->wall_near);
     free(g->id);
     free(g->slot_of);
     free(g->tag);
@@ -237,6 +240,7 @@ int dem_grain_add(dem_world *w, const double x[3], double radius, int material, 
         g->angmom[3 * i + k] = 0.0;
     }
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     w->prepared = 0;
     if (id)
         *id = i;
@@ -360,6 +364,7 @@ int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], co
     if (x) {
         g->x[i] = x[0], g->y[i] = x[1], g->z[i] = x[2];
         w->need_rebuild = 1;
+        w->walls_near_valid = 0;
     }
     if (v)
         g->vx[i] = v[0], g->vy[i] = v[1], g->vz[i] = v[2];
@@ -481,6 +486,7 @@ static int grains_compact(dem_world *w, const unsigned char *keep)
      * springs carry over and the removed grains' ones are dropped. */
     w->n_pairs = w->n_active_pairs = 0;
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     return n - d;
 }
 
@@ -548,8 +554,10 @@ int dem_freeze_outside_x(dem_world *w, double x_lo, double x_hi)
         frozen += f;
     }
     w->n_frozen = frozen;
-    if (changed)
+    if (changed) {
         w->need_rebuild = 1;
+        w->walls_near_valid = 0;
+    }
     return frozen;
 }
 
@@ -590,6 +598,7 @@ int dem_wall_move(dem_world *w, int k, const double point[3])
     if (k < 0 || k >= w->n_walls || !isfinite(point[0]) || !isfinite(point[1]) || !isfinite(point[2]))
         return CM_ERR_RANGE;
     memcpy(w->walls[k].p, point, sizeof w->walls[k].p);
+    w->walls_near_valid = 0; /* every wall is tested until the next rebuild */
     return CM_OK;
 }
 
@@ -996,6 +1005,20 @@ static int neighbour_rebuild(dem_world *w, cm_error *err)
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));
     memcpy(g->y0, g->y, (size_t)g->n * sizeof(double));
     memcpy(g->z0, g->z, (size_t)g->n * sizeof(double));
+    /* walls a grain can reach before the next rebuild: it moves at most
+     * skin/2 until then, so a wall farther than r + skin stays out of reach */
+    for (int i = 0; i < g->n; i++) {
+        uint32_t near = 0;
+        for (int k = 0; k < w->n_walls; k++) {
+            const dem_wall *wl = &w->walls[k];
+            double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] +
+                          (g->z[i] - wl->p[2]) * wl->n[2];
+            if (dist < g->r[i] + w->skin)
+                near |= 1u << k;
+        }
+        g->wall_near[i] = near;
+    }
+    w->walls_near_valid = 1;
     w->rebuild_count++;
     w->prof.rebuilds++;
     w->need_rebuild = 0;
@@ -1025,6 +1048,7 @@ int dem_world_prepare(dem_world *w, cm_error *err)
     if (rc)
         return rc;
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     w->adj_valid = 0; /* a checkpoint read after this replaces the pair list */
     w->prepared = 1;
     return CM_OK;
@@ -1051,6 +1075,8 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
     const int nw = w->n_walls;
     const double dt = w->def.dt;
     const vec3 grav = v3_load(w->def.gravity);
+    const int near_valid = w->walls_near_valid;
+    const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
     int contacts = 0;
     for (int i = lo; i < hi; i++) {
         double m = 1.0 / g->inv_m[i];
@@ -1061,7 +1087,12 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             continue;
         double r = g->r[i];
         uint32_t mask = g->wall_mask[i];
-        for (int k = 0; k < nw; k++) {
+        /* the walls within reach (and any still holding a spring), in
+         * ascending order as the loop over all walls would take them */
+        uint32_t todo = near_valid ? g->wall_near[i] | mask : all;
+        while (todo) {
+            int k = __builtin_ctz(todo);
+            todo &= todo - 1;
             const dem_wall *wl = &w->walls[k];
             vec3 nrm = v3_load(wl->n);
             double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;

@@ -39,6 +39,7 @@ typedef struct dem_grains {
     double *x0, *y0, *z0; /* positions at the last neighbour rebuild */
     double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
     uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
+    uint32_t *wall_near; /* bit k: wall k within r + skin at the last neighbour rebuild (valid while walls_near_valid) */
     int *surf_count;   /* surface contacts of the grain in the last step */
     /* non-spherical grains (cold; spheres: shape -1, sc 1) */
     int *shape;        /* shape id, -1 = sphere (the fast path) */
@@ -81,6 +82,7 @@ struct dem_world {
      * the same for any thread count */
     int *adj_start, *adj_ref;
     int pair_buf_cap;   /* pairs pair_f, pair_on and adj_ref have room for */
+    int walls_near_valid; /* g.wall_near is current (0 after grains or walls changed: every wall is tested) */
     int adj_valid;      /* 0: the list changed (rebuild, checkpoint), adj_* rebuilt before the next pair stage */
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* tangential springs, 3 per pair, in list order */

@@ -12,6 +12,7 @@
  * pairs, so that pairs, gather and integrate overlap the FEM's step. */
 #include "dem_world.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -1172,14 +1173,33 @@ int dem_step_surface(dem_world *w, cm_error *err)
     return rc;
 }
 
+/* The arrays the pair kernel reads, copied out of the world once per stage
+ * so that the compiler keeps them in registers (through w->g it reloads every
+ * pointer after each store into the force and spring arrays). */
+typedef struct pair_arrays {
+    const double *x, *y, *z, *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i;
+    const int *mat, *pi, *pj;
+    double *hist;
+    dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
+    double dt;
+} pair_arrays;
+
+static pair_arrays pair_arrays_of(dem_world *w)
+{
+    const dem_grains *g = &w->g;
+    pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
+                     g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
+                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt};
+    return a;
+}
+
 /* Grain–grain contact of pair p (slots i < j): the force on i and the
  * torques on i and j into out[DEM_PAIR_F]. Returns 1 in contact; out is not
  * written otherwise. */
-static inline __attribute__((always_inline)) int pair_force(dem_world *w, int p, double *restrict out)
+static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g, int p, double *restrict out)
 {
-    dem_grains *g = &w->g;
-    int i = w->pi[p], j = w->pj[p];
-    double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+    int i = g->pi[p], j = g->pj[p];
+    double *xi = g->hist + 3 * (size_t)p;
     double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
     double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
     if (d2 >= rs * rs || d2 == 0.0) { /* coincident centres: no normal, skip */
@@ -1199,14 +1219,14 @@ static inline __attribute__((always_inline)) int pair_force(dem_world *w, int p,
                        v3_cross(v3_add(v3_scale(wi, li), v3_scale(wj, lj)), n));
     double R = g->r[i] * g->r[j] / rs;                        /* eq. 16 */
     double m = 1.0 / (g->inv_m[i] + g->inv_m[j]);             /* eq. 17 */
-    const dem_pair_coef *cf = &w->coef[g->mat[i]][g->mat[j]];
+    const dem_pair_coef *cf = &g->coef[g->mat[i]][g->mat[j]];
     double fn;
-    vec3 F = dem_hm_force(cf, n, delta, R, m, vrel, w->def.dt, xi, &fn);
+    vec3 F = dem_hm_force(cf, n, delta, R, m, vrel, g->dt, xi, &fn);
     /* torques (eq. 7): d_i x F on i, d_j x (-F) on j; both are -l (n x F) */
     vec3 nxf = v3_cross(n, F);
     vec3 Ti = v3_scale(nxf, -li), Tj = v3_scale(nxf, -lj);
     if (cf->mu_roll > 0.0) {
-        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), w->def.dt);
+        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), g->dt);
         Ti = v3_add(Ti, tr);
         Tj = v3_sub(Tj, tr);
     }
@@ -1216,43 +1236,49 @@ static inline __attribute__((always_inline)) int pair_force(dem_world *w, int p,
     return 1;
 }
 
+/* Pairs [lo, hi): forces into pf, contact flags into on; returns the contacts. */
+static int pairs_range(const pair_arrays *in, int lo, int hi, double *restrict pf, unsigned char *restrict on)
+{
+    const pair_arrays a = *in; /* a local copy: its pointers stay in registers */
+    int contacts = 0;
+    for (int p = lo; p < hi; p++) {
+        int c = pair_force(&a, p, pf + (size_t)DEM_PAIR_F * p);
+        on[p] = (unsigned char)c;
+        contacts += c;
+    }
+    return contacts;
+}
+
 /* Stage "pairs", spheres only: every active pair's force stored. Pairs are
  * independent (each owns its spring): any split over threads gives the same
  * numbers. Returns the contacts. */
 static int stage_pairs(dem_world *w)
 {
     const int np = w->n_active_pairs, nt = w->n_threads;
+    const pair_arrays a = pair_arrays_of(w);
     double *pf = w->pair_f;
     unsigned char *on = w->pair_on;
     int contacts = 0;
+    if (nt == 1)
+        return pairs_range(&a, 0, np, pf, on);
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : contacts)
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
-    for (int p = 0; p < np; p++) {
-        int c = pair_force(w, p, pf + (size_t)DEM_PAIR_F * p);
-        on[p] = (unsigned char)c;
-        contacts += c;
+    {
+        int tid = thread_id();
+        contacts += pairs_range(&a, (int)((long)np * tid / nt), (int)((long)np * (tid + 1) / nt), pf, on);
     }
-    (void)nt;
     return contacts;
 }
 
-/* Stage "gather": each grain adds its touching pairs' forces and torques in
- * pair-list order (adj_*), onto what the surface stage left (gravity, walls,
- * triangles): the same additions in the same order as a serial loop over
- * the pairs, for any number of threads. */
-static void stage_gather(dem_world *w)
+/* Grains [lo, hi) of the gather. */
+static void gather_range(dem_grains *g, int lo, int hi, const double *restrict pf, const unsigned char *restrict on,
+                         const int *restrict start, const int *restrict ref)
 {
-    dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads;
-    const double *pf = w->pair_f;
-    const unsigned char *on = w->pair_on;
-    const int *start = w->adj_start, *ref = w->adj_ref;
-#ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-#endif
-    for (int i = 0; i < n; i++) {
-        double fx = g->fx[i], fy = g->fy[i], fz = g->fz[i], tx = g->tx[i], ty = g->ty[i], tz = g->tz[i];
+    double *restrict gfx = g->fx, *restrict gfy = g->fy, *restrict gfz = g->fz;
+    double *restrict gtx = g->tx, *restrict gty = g->ty, *restrict gtz = g->tz;
+    for (int i = lo; i < hi; i++) {
+        double fx = gfx[i], fy = gfy[i], fz = gfz[i], tx = gtx[i], ty = gty[i], tz = gtz[i];
         for (int k = start[i]; k < start[i + 1]; k++) {
             int r = ref[k], p = r >> 1;
             if (!on[p])
@@ -1266,9 +1292,30 @@ static void stage_gather(dem_world *w)
                 tx += f[3], ty += f[4], tz += f[5];
             }
         }
-        g->fx[i] = fx, g->fy[i] = fy, g->fz[i] = fz, g->tx[i] = tx, g->ty[i] = ty, g->tz[i] = tz;
+        gfx[i] = fx, gfy[i] = fy, gfz[i] = fz, gtx[i] = tx, gty[i] = ty, gtz[i] = tz;
     }
-    (void)nt;
+}
+
+/* Stage "gather": each grain adds its touching pairs' forces and torques in
+ * pair-list order (adj_*), onto what the surface stage left (gravity, walls,
+ * triangles): the same additions in the same order as a serial loop over
+ * the pairs, for any number of threads. */
+static void stage_gather(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    if (nt == 1) {
+        gather_range(g, 0, n, w->pair_f, w->pair_on, w->adj_start, w->adj_ref);
+        return;
+    }
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+        int tid = thread_id();
+        gather_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), w->pair_f, w->pair_on,
+                     w->adj_start, w->adj_ref);
+    }
 }
 
 /* Stages "pairs" and "gather" for a world with shaped grains: the shaped
@@ -1280,6 +1327,7 @@ static int stage_pairs_shaped(dem_world *w)
     dem_grains *g = &w->g;
     const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
     int contacts = 0;
+    const pair_arrays pa = pair_arrays_of(w);
     dem_shaped_pose_update(w);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
@@ -1300,7 +1348,7 @@ static int stage_pairs_shaped(dem_world *w)
             double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
             if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
                 double f[DEM_PAIR_F];
-                if (pair_force(w, p, f)) {
+                if (pair_force(&pa, p, f)) {
                     contacts++;
                     fx[i] += f[0], fy[i] += f[1], fz[i] += f[2];
                     fx[j] -= f[0], fy[j] -= f[1], fz[j] -= f[2];
@@ -1324,13 +1372,64 @@ static int stage_pairs_shaped(dem_world *w)
     return contacts;
 }
 
-/* Stage "integrate": Verlet, eqs. 4–5 as predictor/corrector: v(t) =
- * v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) = v(t) +
- * a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt + a dt²/2
- * (eq. 4). Spheres: ω integrated directly (no gyroscopic term), orientation
- * as a unit quaternion rotated by ω dt (no Euler-angle singularity, eq. 9
- * avoided). *maxd2: the largest squared displacement since the last rebuild;
- * returns the first slot with a non-finite position, or n. */
+/* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
+ * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
+ * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
+ * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
+ * orientation as a unit quaternion rotated by ω dt (no Euler-angle
+ * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
+ * since the last rebuild; returns the first slot with a non-finite position,
+ * or INT_MAX. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2_out)
+{
+    double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
+    double *restrict vx = g->vx, *restrict vy = g->vy, *restrict vz = g->vz;
+    double *restrict wx = g->wx, *restrict wy = g->wy, *restrict wz = g->wz;
+    const double *restrict fx = g->fx, *restrict fy = g->fy, *restrict fz = g->fz;
+    const double *restrict tx = g->tx, *restrict ty = g->ty, *restrict tz = g->tz;
+    const double *restrict inv_m = g->inv_m, *restrict inv_i = g->inv_i;
+    const double *restrict x0 = g->x0, *restrict y0 = g->y0, *restrict z0 = g->z0;
+    double *restrict qa = g->q;
+    const unsigned char *restrict frozen = g->frozen;
+    double maxd2 = 0.0;
+    int bad = INT_MAX;
+    for (int i = lo; i < hi; i++) {
+        if (frozen[i])
+            continue;
+        double im = inv_m[i], ii = inv_i[i];
+        vx[i] += fx[i] * im * dt;
+        vy[i] += fy[i] * im * dt;
+        vz[i] += fz[i] * im * dt;
+        wx[i] += tx[i] * ii * dt;
+        wy[i] += ty[i] * ii * dt;
+        wz[i] += tz[i] * ii * dt;
+        x[i] += vx[i] * dt;
+        y[i] += vy[i] * dt;
+        z[i] += vz[i] * dt;
+        /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
+         * the orientation does not feed back into the forces of spheres */
+        double *q = qa + 4 * (size_t)i;
+        double hx = 0.5 * dt * wx[i], hy = 0.5 * dt * wy[i], hz = 0.5 * dt * wz[i];
+        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
+        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
+        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
+        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
+        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+        q[0] = qw * qn, q[1] = qx * qn, q[2] = qy * qn, q[3] = qz * qn;
+        double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
+        double d2 = ex * ex + ey * ey + ez * ez;
+        if (d2 > maxd2)
+            maxd2 = d2;
+        if (!isfinite(d2) && i < bad)
+            bad = i;
+    }
+    *maxd2_out = maxd2;
+    return bad;
+}
+
+/* Stage "integrate": integrate_range over the threads, then the rotation
+ * of shaped grains. *maxd2: the largest squared displacement since the last
+ * rebuild; returns the first slot with a non-finite position, or n. */
 static int stage_integrate(dem_world *w, double *maxd2_out)
 {
     dem_grains *g = &w->g;
@@ -1338,45 +1437,28 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     const double dt = w->def.dt;
     const int shaped = w->n_shaped > 0;
     double maxd2 = 0.0;
-    int bad = n;
+    int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
     if (shaped)
         for (int i = 0; i < n; i++)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
+    if (nt == 1) {
+        bad = integrate_range(g, 0, n, dt, &maxd2);
+    } else {
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : maxd2) reduction(min : bad)
+#pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
 #endif
-    for (int i = 0; i < n; i++) {
-        if (g->frozen[i])
-            continue;
-        double im = g->inv_m[i], ii = g->inv_i[i];
-        g->vx[i] += g->fx[i] * im * dt;
-        g->vy[i] += g->fy[i] * im * dt;
-        g->vz[i] += g->fz[i] * im * dt;
-        g->wx[i] += g->tx[i] * ii * dt;
-        g->wy[i] += g->ty[i] * ii * dt;
-        g->wz[i] += g->tz[i] * ii * dt;
-        g->x[i] += g->vx[i] * dt;
-        g->y[i] += g->vy[i] * dt;
-        g->z[i] += g->vz[i] * dt;
-        /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
-         * the orientation does not feed back into the forces of spheres */
-        double *q = g->q + 4 * i;
-        double hx = 0.5 * dt * g->wx[i], hy = 0.5 * dt * g->wy[i], hz = 0.5 * dt * g->wz[i];
-        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
-        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
-        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
-        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
-        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
-        q[0] = qw * qn, q[1] = qx * qn, q[2] = qy * qn, q[3] = qz * qn;
-        double ex = g->x[i] - g->x0[i], ey = g->y[i] - g->y0[i], ez = g->z[i] - g->z0[i];
-        double d2 = ex * ex + ey * ey + ez * ez;
-        if (d2 > maxd2)
-            maxd2 = d2;
-        if (!isfinite(d2) && i < bad)
-            bad = i;
+        {
+            int tid = thread_id();
+            double m2;
+            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2);
+            maxd2 = m2 > maxd2 ? m2 : maxd2;
+            bad = b < bad ? b : bad;
+        }
     }
+    if (bad > n)
+        bad = n;
     if (shaped) {
         /* Shaped grains: the loop above moved them (translation is the same)
          * but treated their rotation as a sphere's; redo it. Euler's
@@ -1397,7 +1479,6 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             g->wx[i] = om[0], g->wy[i] = om[1], g->wz[i] = om[2];
         }
     }
-    (void)nt;
     *maxd2_out = maxd2;
     return bad;
 }

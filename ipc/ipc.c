@@ -7,7 +7,6 @@
 #include <fcntl.h>
 #include <math.h>
 #include <pthread.h>
-#include <sched.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -273,11 +272,8 @@ static int check_peer(ipc_channel *ch, const char *waiting_for)
 }
 
 /* Shortest spin budget: a peer that answers fast is still noticed (and the
- * budget grows back) at the cost of a few microseconds per wait. */
-#define IPC_SPIN_FLOOR_S 2e-6
-/* Within a spin, the core is offered to another runnable thread (the peer,
- * when it shares our core) after this long. */
-#define IPC_SPIN_YIELD_AFTER_S 1e-6
+ * budget grows back) at the cost of a microsecond per wait. */
+#define IPC_SPIN_FLOOR_S 1e-6
 
 /* Waits for a semaphore. A frame that comes within microseconds (the peer
  * running on the other core) is caught by spinning; a longer wait sleeps in
@@ -286,8 +282,9 @@ static int check_peer(ipc_channel *ch, const char *waiting_for)
  * spin_s) halves after each wait the spin did not catch and doubles after
  * one it did, so that when the peer takes long, or shares our core with a
  * third process, we sleep almost at once instead of burning the core it
- * needs; and while spinning the thread yields the core (sched_yield) after
- * the first microsecond, so a peer runnable on the same core gets it.
+ * needs. (Yielding the core within the spin, sched_yield, was tried: with
+ * many runnable processes a yield can cost a whole scheduling period, and
+ * the ring's round trip on the loaded machine grew instead of shrinking.)
  * *budget: the budget of this kind of wait. deadline_s > 0 bounds the
  * whole wait (handshake); 0 waits as long as the peer lives. */
 static int wait_sem(ipc_channel *ch, sem_t *sem, double *budget, double deadline_s, const char *what,
@@ -302,10 +299,7 @@ static int wait_sem(ipc_channel *ch, sem_t *sem, double *budget, double deadline
                 *budget = fmin(2.0 * *budget, ch->spin_s);
                 goto done;
             }
-            if (t - t0 > IPC_SPIN_YIELD_AFTER_S)
-                sched_yield();
-            else
-                cpu_relax();
+            cpu_relax();
             t = now_s();
         }
         *budget = fmax(0.5 * *budget, fmin(IPC_SPIN_FLOOR_S, ch->spin_s));

@@ -6,11 +6,12 @@
  * positions and velocities (the protocol's ratio). Both ends write every
  * byte they send and read every byte they receive, on both transports.
  *
- * usage: ipc_latency [CSV] [--busy N] [--max-bytes B]
+ * usage: ipc_latency [CSV] [--busy N] [--max-bytes B] [--iters-div K]
  *   --busy N       N extra processes spinning in a busy loop for the whole
  *                  run (a loaded machine: more runnable threads than cores),
  *                  stopped by their pids at the end
- *   --max-bytes B  largest payload (default 2 MB) */
+ *   --max-bytes B  largest payload (default 2 MB)
+ *   --iters-div K  K times fewer round trips per size (a loaded machine) */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -214,15 +215,18 @@ int main(int argc, char **argv)
     const char *csv = NULL;
     int busy = 0;
     size_t max_bytes = 2u * 1024 * 1024;
+    int iters_div = 1;
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--busy") == 0 && i + 1 < argc)
             busy = atoi(argv[++i]);
         else if (strcmp(argv[i], "--max-bytes") == 0 && i + 1 < argc)
             max_bytes = (size_t)atol(argv[++i]);
+        else if (strcmp(argv[i], "--iters-div") == 0 && i + 1 < argc)
+            iters_div = atoi(argv[++i]) > 0 ? atoi(argv[i]) : 1;
         else if (argv[i][0] != '-')
             csv = argv[i];
         else {
-            fprintf(stderr, "usage: %s [CSV] [--busy N] [--max-bytes B]\n", argv[0]);
+            fprintf(stderr, "usage: %s [CSV] [--busy N] [--max-bytes B] [--iters-div K]\n", argv[0]);
             return 2;
         }
     }
@@ -247,7 +251,9 @@ int main(int argc, char **argv)
         uint32_t nodes = (uint32_t)(bytes / 24);
         if (nodes < 3)
             nodes = 3;
-        int iters = bytes <= 16384 ? 20000 : bytes <= 262144 ? 2000 : 300;
+        int iters = (bytes <= 16384 ? 20000 : bytes <= 262144 ? 2000 : 300) / iters_div;
+        if (iters < 20)
+            iters = 20;
         /* Median of three runs per transport, interleaved, to tame the noise. */
         double r[3], p[3];
         for (int k = 0; k < 3; k++) {

@@ -1,14 +1,20 @@
 /* The coupled DEM loop: dem_server's side of the exchange with fem_server
  * (ipc/PROTOCOL.md), the paper's fig. 8 split over two processes.
  *
- * Per exchange n (every k = coupling.exchange_every DEM steps):
- *   k x  dem_step_surface   grain–wall and grain–triangle forces at x(t),
- *                           node forces summed over the interval
- *        send               the interval's mean node forces (eq. 42) and totals
- *   k x  dem_step_grains    grain–grain work, overlapping the FEM's step
- *        receive            surface positions and velocities at t + k dt
- *        dem_surface_update BVH refit
- * With k > 1 the surface moves with its nodes' velocities between exchanges. */
+ * One exchange n (k = coupling.exchange_every DEM steps) is a pipeline of
+ * named stages, each timed into dem_coupled_profile:
+ *   surface   k x: surface moved along its node velocities (j > 0),
+ *             dem_step_surface (gravity, walls, triangles at x(t)), node
+ *             forces and totals summed; between them the first k - 1
+ *             dem_step_grains
+ *   send      the interval's mean node forces (eq. 42) and totals posted
+ *   grains    the last dem_step_grains (grain pairs, gather, integrate,
+ *             neighbour rebuild): overlaps the FEM's step
+ *   wait      the FEM's reply: surface positions and velocities at t + k dt
+ *   update    dem_surface_update (BVH refit), the terrain window moved
+ *   record    output hook, checkpoint, health check, progress line
+ * The FEM needs only the forces, so everything after send runs while it
+ * steps; the DEM waits only if its grain work is shorter than the FEM's step. */
 #include "dem_coupled.h"
 
 #include <math.h>
@@ -74,6 +80,87 @@ static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
                        "coupling.dt is too long; raise the tread material's young modulus or reduce coupling.dt",
                        100 * s.max_overlap_surface, s.time, s.step, 100 * def->max_surface_overlap);
     return CM_OK;
+}
+
+/* Adds the wall time since *t to *acc and restarts the clock. */
+static void lap(double *t, double *acc)
+{
+    double now = cm_now();
+    *acc += now - *t;
+    *t = now;
+}
+
+/* Stage "surface": the interval's k surface steps (and the k - 1 grain steps
+ * between them), node forces summed into c->f_sum, totals into *acc. */
+static int stage_surface(coupled *c, const dem_coupled_def *def, int finish, dem_surface_total *acc, cm_error *err)
+{
+    const size_t m = 3 * (size_t)c->nn;
+    const int k_steps = def->exchange_every;
+    int rc;
+    memset(acc, 0, sizeof *acc);
+    memset(c->f_sum, 0, m * sizeof *c->f_sum);
+    if (finish)
+        return CM_OK;
+    for (int j = 0; j < k_steps; j++) {
+        if (j > 0 && (rc = move_surface(c, j * def->dt, err)))
+            return rc;
+        if ((rc = dem_step_surface(c->w, err)))
+            return rc;
+        const double *fn = dem_surface_node_forces(c->w);
+        for (size_t q = 0; q < m; q++)
+            c->f_sum[q] += fn[q];
+        dem_surface_total tt;
+        dem_surface_totals(c->w, &tt);
+        for (int a = 0; a < 3; a++) {
+            acc->force[a] += tt.force[a];
+            acc->moment[a] += tt.moment[a];
+        }
+        acc->traction_pos += tt.traction_pos;
+        acc->traction_neg += tt.traction_neg;
+        acc->contacts += tt.contacts;
+        if (j < k_steps - 1 && (rc = dem_step_grains(c->w, err)))
+            return rc;
+    }
+    return CM_OK;
+}
+
+/* Stage "send": the interval's mean forces (or the finish frame) posted.
+ * Returns the ring's status (an ipc error: the caller reports the peer). */
+static int stage_send(coupled *c, const dem_coupled_def *def, int finish, double time, long n,
+                      const dem_surface_total *acc, int *asked_checkpoint)
+{
+    const size_t m = 3 * (size_t)c->nn;
+    const int k_steps = def->exchange_every;
+    ipc_frame_head *out;
+    double *p;
+    int rc;
+    if ((rc = ipc_send_begin(c->ch, &out, &p)))
+        return rc;
+    out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
+    out->time = time;
+    if (!finish) {
+        double inv = 1.0 / k_steps, interval = def->dt * k_steps;
+        for (size_t q = 0; q < m; q++) {
+            p[q] = c->f_sum[q] * inv;
+            c->w_dem += p[q] * c->v[q] * interval; /* power of the forces on the moving surface */
+        }
+        for (int a = 0; a < 3; a++) {
+            out->info[IPC_INFO_FORCE_X + a] = acc->force[a] * inv;
+            out->info[IPC_INFO_MOMENT_X + a] = acc->moment[a] * inv;
+        }
+        out->info[IPC_INFO_TRACTION_POS] = acc->traction_pos * inv;
+        out->info[IPC_INFO_TRACTION_NEG] = acc->traction_neg * inv;
+        out->info[IPC_INFO_CONTACTS] = acc->contacts * inv;
+        out->info[IPC_INFO_DEM_WORK] = c->w_dem;
+        out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
+        out->info[IPC_INFO_BED_TOP] = def->bed_top;
+        if (def->interrupt && *def->interrupt && !*asked_checkpoint) {
+            out->flags |= IPC_FLAG_CHECKPOINT; /* interrupted: checkpoint this exchange, then stop */
+            *asked_checkpoint = 1;
+            cm_log_info("interrupted: asking fem_server for a checkpoint of exchange %ld", n);
+        }
+    }
+    return ipc_send_commit(c->ch);
 }
 
 int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *err)
@@ -148,71 +235,26 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
     }
     const long n_first = n;
+    dem_coupled_profile prof = {0};
+    double t_lap = cm_now();
     for (;; n++) {
         int finish = stop_requested || time >= def->end_time - 0.5 * def->dt;
         dem_surface_total acc;
-        memset(&acc, 0, sizeof acc);
-        memset(c.f_sum, 0, m * sizeof *c.f_sum);
-        if (!finish) {
-            for (int j = 0; j < k_steps; j++) {
-                if (j > 0 && (rc = move_surface(&c, j * def->dt, err)))
-                    goto done;
-                if ((rc = dem_step_surface(w, err)))
-                    goto done;
-                const double *fn = dem_surface_node_forces(w);
-                for (size_t q = 0; q < m; q++)
-                    c.f_sum[q] += fn[q];
-                dem_surface_total tt;
-                dem_surface_totals(w, &tt);
-                for (int a = 0; a < 3; a++) {
-                    acc.force[a] += tt.force[a];
-                    acc.moment[a] += tt.moment[a];
-                }
-                acc.traction_pos += tt.traction_pos;
-                acc.traction_neg += tt.traction_neg;
-                acc.contacts += tt.contacts;
-                if (j < k_steps - 1 && (rc = dem_step_grains(w, err)))
-                    goto done;
-            }
-        }
-        /* Post the interval's mean forces first, then do the grain work. */
-        ipc_frame_head *out;
-        double *p;
-        if ((rc = ipc_send_begin(c.ch, &out, &p)))
+        if ((rc = stage_surface(&c, def, finish, &acc, err)))
+            goto done;
+        lap(&t_lap, &prof.surface);
+        if ((rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
             break;
-        out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
-        out->time = time;
-        if (!finish) {
-            double inv = 1.0 / k_steps;
-            for (size_t q = 0; q < m; q++) {
-                p[q] = c.f_sum[q] * inv;
-                c.w_dem += p[q] * c.v[q] * interval; /* power of the forces on the moving surface */
-            }
-            for (int a = 0; a < 3; a++) {
-                out->info[IPC_INFO_FORCE_X + a] = acc.force[a] * inv;
-                out->info[IPC_INFO_MOMENT_X + a] = acc.moment[a] * inv;
-            }
-            out->info[IPC_INFO_TRACTION_POS] = acc.traction_pos * inv;
-            out->info[IPC_INFO_TRACTION_NEG] = acc.traction_neg * inv;
-            out->info[IPC_INFO_CONTACTS] = acc.contacts * inv;
-            out->info[IPC_INFO_DEM_WORK] = c.w_dem;
-            out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
-            out->info[IPC_INFO_BED_TOP] = def->bed_top;
-            if (def->interrupt && *def->interrupt && !asked_checkpoint) {
-                out->flags |= IPC_FLAG_CHECKPOINT; /* interrupted: checkpoint this exchange, then stop */
-                asked_checkpoint = 1;
-                cm_log_info("interrupted: asking fem_server for a checkpoint of exchange %ld", n);
-            }
-        }
-        if ((rc = ipc_send_commit(c.ch)))
-            break;
+        lap(&t_lap, &prof.send);
         if (!finish && (rc = dem_step_grains(w, err)))
             goto done;
+        lap(&t_lap, &prof.grains);
 
         const ipc_frame_head *in;
         const double *q;
         if ((rc = ipc_recv(c.ch, &in, &q)))
             break;
+        lap(&t_lap, &prof.wait);
         uint32_t kind = in->kind, flags = in->flags;
         double wheel_x = in->info[IPC_INFO_CENTER_X];
         /* After our own request the run ends whether or not the peer
@@ -235,6 +277,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         /* between two steps: grains at x(t), the next force sum starts after */
         if (def->window && isfinite(wheel_x) && (rc = dem_window_update(def->window, w, wheel_x, err)))
             goto done;
+        lap(&t_lap, &prof.update);
 
         if (hooks && hooks->after_exchange && (rc = hooks->after_exchange(w, hooks->user, n, err)))
             goto done;
@@ -256,7 +299,11 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
                         steps / (now - t_start), 1e-6 * steps * st.grains / (now - t_start), st.grains,
                         acc.contacts / (double)k_steps);
         }
+        lap(&t_lap, &prof.record);
+        prof.exchanges++;
     }
+    if (def->profile)
+        *def->profile = prof;
     if (rc) {
         /* The exchange failed: the message names the peer and the step. */
         rc = cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_error(c.ch));

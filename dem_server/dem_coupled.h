@@ -12,6 +12,18 @@
 /* Status returned when the exchange or the peer failed (exit code 3). */
 #define DEM_COUPLED_PEER (-100)
 
+/* Where the coupled loop's wall time went, per stage of an exchange
+ * (dem_coupled.c), summed over the run. */
+typedef struct dem_coupled_profile {
+    double surface;  /* s, k x (surface moved, dem_step_surface, node forces summed), and the k - 1 grain steps between */
+    double send;     /* s, the interval's mean forces packed and posted */
+    double grains;   /* s, dem_step_grains of the last step: overlaps the FEM's step */
+    double wait;     /* s, waiting for the FEM's reply (ipc_recv) */
+    double update;   /* s, the received surface installed (BVH refit), terrain window moved */
+    double record;   /* s, output, checkpoints, health check, progress line */
+    long exchanges;  /* exchanges completed */
+} dem_coupled_profile;
+
 typedef struct dem_coupled_def {
     const char *shm;        /* segment name chosen by the launcher */
     double dt;              /* s, DEM step (coupling.dt) */
@@ -30,6 +42,7 @@ typedef struct dem_coupled_def {
                                           then end the run cleanly (SIGINT/SIGTERM); may be NULL */
     dem_window *window;     /* terrain window moved with the wheel every exchange (NULL = none) */
     dem_window_def window_def; /* its keys (also the footprint check's expected sinkage without a window) */
+    dem_coupled_profile *profile; /* out: where the time went (may be NULL) */
 } dem_coupled_def;
 
 /* The coupled loop's own state, saved in checkpoints besides the world's. */

@@ -53,7 +53,27 @@ typedef struct options {
     const char *scene, *shm, *out, *resume;
     int threads;
     int standalone;
+    char **argv; /* for the re-execution with passive OpenMP waiting */
 } options;
+
+/* OpenMP threads that wait actively spin on their core between parallel
+ * regions; next to fem_server (and on a shared machine) that burns the core
+ * the peer or the other thread needs: 2 DEM threads were 5.5x slower than 1.
+ * Passive waiting (threads sleep on a futex at once) is the project's choice.
+ * libgomp reads OMP_WAIT_POLICY when the library starts, before main, so
+ * when it is unset and more than one thread will run, dem_server executes
+ * itself again with it set (same pid, same arguments). ./run sets it itself;
+ * a value the user gives is kept. Returns only if the re-execution failed. */
+static void ensure_passive_waiting(const options *o, int threads)
+{
+    if (threads == 1 || getenv("OMP_WAIT_POLICY"))
+        return;
+    if (setenv("OMP_WAIT_POLICY", "passive", 1) != 0)
+        return;
+    fflush(NULL);
+    execv("/proc/self/exe", o->argv);
+    cm_log_warn("cannot re-execute with OMP_WAIT_POLICY=passive (%s): OpenMP threads wait actively", strerror(errno));
+}
 
 typedef struct output_ctx {
     const dem_config *cfg;
@@ -177,6 +197,54 @@ static int add_listed_grains(cm_scene *s, const dem_config *cfg, dem_world *w, c
     return CM_OK;
 }
 
+/* The step's stages and the coupled loop's, with their shares: printed, and
+ * written to DIR/dem_profile.csv (stage, seconds, share of its group,
+ * count) when there is an output folder. */
+static void report_profile(const dem_profile *p, const dem_coupled_profile *c, const char *dir)
+{
+    const char *names[] = {"rebuild", "surface", "pairs", "gather", "integrate"};
+    const double t[] = {p->rebuild, p->surface, p->pairs, p->gather, p->integrate};
+    const char *cnames[] = {"surface", "send", "grains", "wait", "update", "record"};
+    const double ct[] = {c ? c->surface : 0, c ? c->send : 0,   c ? c->grains : 0,
+                         c ? c->wait : 0,    c ? c->update : 0, c ? c->record : 0};
+    double tot = 0, ctot = 0;
+    for (int k = 0; k < 5; k++)
+        tot += t[k];
+    for (int k = 0; k < 6; k++)
+        ctot += ct[k];
+    char line[512];
+    int len = snprintf(line, sizeof line, "profile of the step (%ld steps, %ld rebuilds):", p->steps, p->rebuilds);
+    for (int k = 0; k < 5; k++)
+        len += snprintf(line + len, sizeof line - (size_t)len, " %s %.2f s (%.0f %%)", names[k], t[k],
+                        tot > 0 ? 100 * t[k] / tot : 0.0);
+    cm_log_info("%s", line);
+    if (c) {
+        len = snprintf(line, sizeof line, "profile of the exchange (%ld exchanges):", c->exchanges);
+        for (int k = 0; k < 6; k++)
+            len += snprintf(line + len, sizeof line - (size_t)len, " %s %.2f s (%.0f %%)", cnames[k], ct[k],
+                            ctot > 0 ? 100 * ct[k] / ctot : 0.0);
+        cm_log_info("%s", line);
+    }
+    if (!dir)
+        return;
+    char path[1200];
+    snprintf(path, sizeof path, "%s/dem_profile.csv", dir);
+    FILE *f = fopen(path, "w");
+    if (!f) {
+        cm_log_warn("cannot write %s: %s", path, strerror(errno));
+        return;
+    }
+    fprintf(f, "group,stage,seconds,share,count\n");
+    for (int k = 0; k < 5; k++)
+        fprintf(f, "step,%s,%.6f,%.4f,%ld\n", names[k], t[k], tot > 0 ? t[k] / tot : 0.0,
+                k == 0 ? p->rebuilds : p->steps);
+    if (c)
+        for (int k = 0; k < 6; k++)
+            fprintf(f, "exchange,%s,%.6f,%.4f,%ld\n", cnames[k], ct[k], ctot > 0 ? ct[k] / ctot : 0.0, c->exchanges);
+    if (fclose(f) != 0)
+        cm_log_warn("cannot write %s", path);
+}
+
 static int run(const options *o)
 {
     cm_error err = {0};
@@ -188,6 +256,7 @@ static int run(const options *o)
     cm_run_config rcfg;
     dem_config cfg;
     int surface_material = 0, exit_code = 1, rc;
+    dem_coupled_profile cprof = {0};
 
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
         (rc = dem_config_read(scene, &cfg, &err)))
@@ -202,6 +271,7 @@ static int run(const options *o)
     }
     if (o->threads > 0)
         cfg.world.threads = o->threads;
+    ensure_passive_waiting(o, cfg.world.threads);
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -217,7 +287,8 @@ static int run(const options *o)
                            .surface_material = surface_material,
                            .max_overlap = rcfg.max_overlap,
                            .max_surface_overlap = rcfg.max_surface_overlap,
-                           .stop_flag = &g_stop};
+                           .stop_flag = &g_stop,
+                           .profile = &cprof};
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */
     if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
@@ -333,10 +404,11 @@ static int run(const options *o)
                         ws->x_back, ws->x_front);
         }
     }
-    dem_stats s;
-    dem_world_stats(w, &s);
-    cm_log_info("profile: broad %.2f s (%ld rebuilds), narrow %.2f s, exchange %.2f s, integrate %.2f s",
-                s.profile.broad, s.profile.rebuilds, s.profile.narrow, s.profile.exchange, s.profile.integrate);
+    {
+        dem_stats s;
+        dem_world_stats(w, &s);
+        report_profile(&s.profile, o->standalone ? NULL : &cprof, octx.dir);
+    }
     goto cleanup;
 fail:
     cm_log_error("%s", err.msg);
@@ -363,7 +435,7 @@ static int usage(void)
 
 int main(int argc, char **argv)
 {
-    options o = {0};
+    options o = {.argv = argv};
     int print_config = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;

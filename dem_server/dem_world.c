@@ -1,11 +1,18 @@
-/* The world and its time step, read top-down as a pipeline:
- *   dem_step_surface: clear forces -> gravity -> walls -> triangle surface
- *   dem_step_grains:  grain–grain (neighbour list) -> merge thread buffers
- *                     -> Verlet (eqs. 4–5), ω and quaternion -> neighbour
- *                     list rebuild when a grain moved more than skin/2
- * Each phase is timed into w->prof. */
+/* The world and its time step. One step is a pipeline of named stages, each
+ * timed into w->prof (dem_profile):
+ *   surface    clear forces -> gravity -> walls -> triangle surface     (dem_step_surface)
+ *   pairs      grain–grain narrow phase over the neighbour list; each     (dem_step_grains)
+ *              pair's force and torques stored in pair_f, nothing summed
+ *   gather     per grain, its pairs' forces added in pair-list order
+ *              (adj_*): the sums do not depend on the thread count
+ *   integrate  Verlet (eqs. 4–5), ω and quaternion, largest displacement
+ *   rebuild    neighbour grid, re-sort and pair list when a grain moved
+ *              more than skin/2 (or the grains changed)
+ * In the coupled loop (dem_coupled.c) the exchange sits between surface and
+ * pairs, so that pairs, gather and integrate overlap the FEM's step. */
 #include "dem_world.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -110,6 +117,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * 3, sizeof(double), &bad);
     g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
     g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
+    g->wall_near = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
     g->id = xcalloc((size_t)cap, sizeof(int), &bad);
     g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
     g->tag = xcalloc((size_t)cap, sizeof(int), &bad);
@@ -120,6 +128,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->inertia = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
     g->angmom = xcalloc(3 * (size_t)cap, sizeof(double), &bad);
     w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
+    w->adj_start = xcalloc((size_t)cap + 1, sizeof(int), &bad);
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)
@@ -129,6 +138,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
         return cm_fail(err, CM_ERR_NOMEM, "dem_world_create: out of memory for %d grains", cap);
     }
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     *out = w;
     return CM_OK;
 }
@@ -147,6 +157,7 @@ void dem_world_destroy(dem_world **wp)
     free(g->wall_hist);
     free(g->mat);
     free(g->wall_mask);
+    free(g->wall_near);
     free(g->id);
     free(g->slot_of);
     free(g->tag);
@@ -163,6 +174,10 @@ void dem_world_destroy(dem_world **wp)
     free(w->cell_items);
     free(w->pi);
     free(w->pj);
+    free(w->pair_f);
+    free(w->pair_on);
+    free(w->adj_start);
+    free(w->adj_ref);
     free(w->hist_val[0]);
     free(w->hist_val[1]);
     dem_hash_free(&w->hist[0]);
@@ -226,6 +241,7 @@ int dem_grain_add(dem_world *w, const double x[3], double radius, int material, 
         g->angmom[3 * i + k] = 0.0;
     }
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     w->prepared = 0;
     if (id)
         *id = i;
@@ -349,6 +365,7 @@ int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], co
     if (x) {
         g->x[i] = x[0], g->y[i] = x[1], g->z[i] = x[2];
         w->need_rebuild = 1;
+        w->walls_near_valid = 0;
     }
     if (v)
         g->vx[i] = v[0], g->vy[i] = v[1], g->vz[i] = v[2];
@@ -470,6 +487,7 @@ static int grains_compact(dem_world *w, const unsigned char *keep)
      * springs carry over and the removed grains' ones are dropped. */
     w->n_pairs = w->n_active_pairs = 0;
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
     return n - d;
 }
 
@@ -537,8 +555,10 @@ int dem_freeze_outside_x(dem_world *w, double x_lo, double x_hi)
         frozen += f;
     }
     w->n_frozen = frozen;
-    if (changed)
+    if (changed) {
         w->need_rebuild = 1;
+        w->walls_near_valid = 0;
+    }
     return frozen;
 }
 
@@ -579,6 +599,7 @@ int dem_wall_move(dem_world *w, int k, const double point[3])
     if (k < 0 || k >= w->n_walls || !isfinite(point[0]) || !isfinite(point[1]) || !isfinite(point[2]))
         return CM_ERR_RANGE;
     memcpy(w->walls[k].p, point, sizeof w->walls[k].p);
+    w->walls_near_valid = 0; /* every wall is tested until the next rebuild */
     return CM_OK;
 }
 
@@ -645,7 +666,7 @@ int dem_surface_update(dem_world *w, const double *node_x, const double *node_v,
         memset(s->v, 0, (size_t)n3 * sizeof *s->v);
     double t0 = cm_now();
     dem_surface_refit(s);
-    w->prof.exchange += cm_now() - t0;
+    w->prof.surface += cm_now() - t0;
     return CM_OK;
 }
 
@@ -857,6 +878,46 @@ static int grid_build(dem_world *w, grid_dims *gd)
     return CM_OK;
 }
 
+/* Each grain's pairs in list order (adj_start, adj_ref) and room for the
+ * pair forces. Pairs are listed by their first grain i (ascending), so a
+ * grain's list holds first the pairs where it is j, then those where it is i:
+ * the order in which a serial loop over the pairs would add them. */
+static int pair_adjacency(dem_world *w, cm_error *err)
+{
+    const int n = w->g.n, np = w->n_active_pairs;
+    if (np > w->pair_buf_cap) {
+        int cap = w->pair_buf_cap ? w->pair_buf_cap : 1024;
+        while (cap < np)
+            cap *= 2;
+        double *f = realloc(w->pair_f, (size_t)cap * DEM_PAIR_F * sizeof *f);
+        if (f)
+            w->pair_f = f;
+        unsigned char *on = realloc(w->pair_on, (size_t)cap);
+        if (on)
+            w->pair_on = on;
+        int *ref = realloc(w->adj_ref, 2 * (size_t)cap * sizeof *ref);
+        if (ref)
+            w->adj_ref = ref;
+        if (!f || !on || !ref)
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the forces of %d pairs", w->step, np);
+        w->pair_buf_cap = cap;
+    }
+    int *start = w->adj_start, *ref = w->adj_ref;
+    memset(start, 0, ((size_t)n + 1) * sizeof *start);
+    for (int p = 0; p < np; p++)
+        start[w->pi[p] + 1]++, start[w->pj[p] + 1]++;
+    for (int i = 0; i < n; i++)
+        start[i + 1] += start[i];
+    int *pos = (int *)w->scratch; /* cursor (cap ints); scratch is free here */
+    memcpy(pos, start, (size_t)n * sizeof *pos);
+    for (int p = 0; p < np; p++) {
+        ref[pos[w->pi[p]]++] = 2 * p;
+        ref[pos[w->pj[p]]++] = 2 * p + 1;
+    }
+    w->adj_valid = 1;
+    return CM_OK;
+}
+
 static int neighbour_rebuild(dem_world *w, cm_error *err)
 {
     dem_grains *g = &w->g;
@@ -945,10 +1006,24 @@ static int neighbour_rebuild(dem_world *w, cm_error *err)
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));
     memcpy(g->y0, g->y, (size_t)g->n * sizeof(double));
     memcpy(g->z0, g->z, (size_t)g->n * sizeof(double));
+    /* walls a grain can reach before the next rebuild: it moves at most
+     * skin/2 until then, so a wall farther than r + skin stays out of reach */
+    for (int i = 0; i < g->n; i++) {
+        uint32_t near = 0;
+        for (int k = 0; k < w->n_walls; k++) {
+            const dem_wall *wl = &w->walls[k];
+            double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] +
+                          (g->z[i] - wl->p[2]) * wl->n[2];
+            if (dist < g->r[i] + w->skin)
+                near |= 1u << k;
+        }
+        g->wall_near[i] = near;
+    }
+    w->walls_near_valid = 1;
     w->rebuild_count++;
     w->prof.rebuilds++;
     w->need_rebuild = 0;
-    return CM_OK;
+    return pair_adjacency(w, err);
 }
 
 int dem_world_prepare(dem_world *w, cm_error *err)
@@ -974,6 +1049,8 @@ int dem_world_prepare(dem_world *w, cm_error *err)
     if (rc)
         return rc;
     w->need_rebuild = 1;
+    w->walls_near_valid = 0;
+    w->adj_valid = 0; /* a checkpoint read after this replaces the pair list */
     w->prepared = 1;
     return CM_OK;
 }
@@ -999,6 +1076,8 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
     const int nw = w->n_walls;
     const double dt = w->def.dt;
     const vec3 grav = v3_load(w->def.gravity);
+    const int near_valid = w->walls_near_valid;
+    const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
     int contacts = 0;
     for (int i = lo; i < hi; i++) {
         double m = 1.0 / g->inv_m[i];
@@ -1009,7 +1088,12 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             continue;
         double r = g->r[i];
         uint32_t mask = g->wall_mask[i];
-        for (int k = 0; k < nw; k++) {
+        /* the walls within reach (and any still holding a spring), in
+         * ascending order as the loop over all walls would take them */
+        uint32_t todo = near_valid ? g->wall_near[i] | mask : all;
+        while (todo) {
+            int k = __builtin_ctz(todo);
+            todo &= todo - 1;
             const dem_wall *wl = &w->walls[k];
             vec3 nrm = v3_load(wl->n);
             double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
@@ -1085,18 +1169,37 @@ int dem_step_surface(dem_world *w, cm_error *err)
     int rc = CM_OK;
     if (w->surf)
         rc = dem_surface_contacts(w, err);
-    w->prof.exchange += cm_now() - t0;
+    w->prof.surface += cm_now() - t0;
     return rc;
 }
 
-/* Grain–grain contact of pair p (slots i < j); force and torques written to
- * the arrays f (6 blocks of cap: fx fy fz tx ty tz). Returns 1 in contact. */
-static inline __attribute__((always_inline)) int pair_contact(dem_world *w, int p, double *fx, double *fy, double *fz, double *tx, double *ty,
-                               double *tz)
+/* The arrays the pair kernel reads, copied out of the world once per stage
+ * so that the compiler keeps them in registers (through w->g it reloads every
+ * pointer after each store into the force and spring arrays). */
+typedef struct pair_arrays {
+    const double *x, *y, *z, *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i;
+    const int *mat, *pi, *pj;
+    double *hist;
+    dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
+    double dt;
+} pair_arrays;
+
+static pair_arrays pair_arrays_of(dem_world *w)
 {
-    dem_grains *g = &w->g;
-    int i = w->pi[p], j = w->pj[p];
-    double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+    const dem_grains *g = &w->g;
+    pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
+                     g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
+                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt};
+    return a;
+}
+
+/* Grain–grain contact of pair p (slots i < j): the force on i and the
+ * torques on i and j into out[DEM_PAIR_F]. Returns 1 in contact; out is not
+ * written otherwise. */
+static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g, int p, double *restrict out)
+{
+    int i = g->pi[p], j = g->pj[p];
+    double *xi = g->hist + 3 * (size_t)p;
     double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
     double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
     if (d2 >= rs * rs || d2 == 0.0) { /* coincident centres: no normal, skip */
@@ -1116,47 +1219,116 @@ static inline __attribute__((always_inline)) int pair_contact(dem_world *w, int 
                        v3_cross(v3_add(v3_scale(wi, li), v3_scale(wj, lj)), n));
     double R = g->r[i] * g->r[j] / rs;                        /* eq. 16 */
     double m = 1.0 / (g->inv_m[i] + g->inv_m[j]);             /* eq. 17 */
-    const dem_pair_coef *cf = &w->coef[g->mat[i]][g->mat[j]];
+    const dem_pair_coef *cf = &g->coef[g->mat[i]][g->mat[j]];
     double fn;
-    vec3 F = dem_hm_force(cf, n, delta, R, m, vrel, w->def.dt, xi, &fn);
+    vec3 F = dem_hm_force(cf, n, delta, R, m, vrel, g->dt, xi, &fn);
     /* torques (eq. 7): d_i x F on i, d_j x (-F) on j; both are -l (n x F) */
     vec3 nxf = v3_cross(n, F);
     vec3 Ti = v3_scale(nxf, -li), Tj = v3_scale(nxf, -lj);
     if (cf->mu_roll > 0.0) {
-        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), w->def.dt);
+        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), g->dt);
         Ti = v3_add(Ti, tr);
         Tj = v3_sub(Tj, tr);
     }
-    fx[i] += F.x, fy[i] += F.y, fz[i] += F.z;
-    fx[j] -= F.x, fy[j] -= F.y, fz[j] -= F.z;
-    tx[i] += Ti.x, ty[i] += Ti.y, tz[i] += Ti.z;
-    tx[j] += Tj.x, ty[j] += Tj.y, tz[j] += Tj.z;
+    out[0] = F.x, out[1] = F.y, out[2] = F.z;
+    out[3] = Ti.x, out[4] = Ti.y, out[5] = Ti.z;
+    out[6] = Tj.x, out[7] = Tj.y, out[8] = Tj.z;
     return 1;
 }
 
-int dem_step_grains(dem_world *w, cm_error *err)
+/* Pairs [lo, hi): forces into pf, contact flags into on; returns the contacts. */
+static int pairs_range(const pair_arrays *in, int lo, int hi, double *restrict pf, unsigned char *restrict on)
 {
-    if (!w->prepared)
-        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
-    dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads, cap = g->cap;
-    const double dt = w->def.dt;
-    if (w->need_rebuild) {
-        double t0 = cm_now();
-        int rc = neighbour_rebuild(w, err);
-        w->prof.broad += cm_now() - t0;
-        if (rc)
-            return rc;
-    }
-    /* narrow phase: pairs split in nt contiguous blocks; thread t > 0
-     * accumulates into its own buffer, merged below in thread order, so the
-     * sums are the same for a given thread count */
-    double t0 = cm_now();
+    const pair_arrays a = *in; /* a local copy: its pointers stay in registers */
     int contacts = 0;
-    const int np = w->n_active_pairs;
-    const int shaped = w->n_shaped > 0;
-    if (shaped)
-        dem_shaped_pose_update(w);
+    for (int p = lo; p < hi; p++) {
+        int c = pair_force(&a, p, pf + (size_t)DEM_PAIR_F * p);
+        on[p] = (unsigned char)c;
+        contacts += c;
+    }
+    return contacts;
+}
+
+/* Stage "pairs", spheres only: every active pair's force stored. Pairs are
+ * independent (each owns its spring): any split over threads gives the same
+ * numbers. Returns the contacts. */
+static int stage_pairs(dem_world *w)
+{
+    const int np = w->n_active_pairs, nt = w->n_threads;
+    const pair_arrays a = pair_arrays_of(w);
+    double *pf = w->pair_f;
+    unsigned char *on = w->pair_on;
+    int contacts = 0;
+    if (nt == 1)
+        return pairs_range(&a, 0, np, pf, on);
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+        int tid = thread_id();
+        contacts += pairs_range(&a, (int)((long)np * tid / nt), (int)((long)np * (tid + 1) / nt), pf, on);
+    }
+    return contacts;
+}
+
+/* Grains [lo, hi) of the gather. */
+static void gather_range(dem_grains *g, int lo, int hi, const double *restrict pf, const unsigned char *restrict on,
+                         const int *restrict start, const int *restrict ref)
+{
+    double *restrict gfx = g->fx, *restrict gfy = g->fy, *restrict gfz = g->fz;
+    double *restrict gtx = g->tx, *restrict gty = g->ty, *restrict gtz = g->tz;
+    for (int i = lo; i < hi; i++) {
+        double fx = gfx[i], fy = gfy[i], fz = gfz[i], tx = gtx[i], ty = gty[i], tz = gtz[i];
+        for (int k = start[i]; k < start[i + 1]; k++) {
+            int r = ref[k], p = r >> 1;
+            if (!on[p])
+                continue;
+            const double *f = pf + (size_t)DEM_PAIR_F * p;
+            if (r & 1) { /* the pair's j: -F, its own torque */
+                fx -= f[0], fy -= f[1], fz -= f[2];
+                tx += f[6], ty += f[7], tz += f[8];
+            } else {
+                fx += f[0], fy += f[1], fz += f[2];
+                tx += f[3], ty += f[4], tz += f[5];
+            }
+        }
+        gfx[i] = fx, gfy[i] = fy, gfz[i] = fz, gtx[i] = tx, gty[i] = ty, gtz[i] = tz;
+    }
+}
+
+/* Stage "gather": each grain adds its touching pairs' forces and torques in
+ * pair-list order (adj_*), onto what the surface stage left (gravity, walls,
+ * triangles): the same additions in the same order as a serial loop over
+ * the pairs, for any number of threads. */
+static void stage_gather(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    if (nt == 1) {
+        gather_range(g, 0, n, w->pair_f, w->pair_on, w->adj_start, w->adj_ref);
+        return;
+    }
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt)
+#endif
+    {
+        int tid = thread_id();
+        gather_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), w->pair_f, w->pair_on,
+                     w->adj_start, w->adj_ref);
+    }
+}
+
+/* Stages "pairs" and "gather" for a world with shaped grains: the shaped
+ * contacts (dem_shape.c) add into force arrays, so each thread adds its
+ * contiguous block of pairs into its own buffer (thread 0 into the grain
+ * arrays), merged in thread order: deterministic for a given thread count. */
+static int stage_pairs_shaped(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
+    int contacts = 0;
+    const pair_arrays pa = pair_arrays_of(w);
+    dem_shaped_pose_update(w);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
@@ -1171,18 +1343,21 @@ int dem_step_grains(dem_world *w, cm_error *err)
             memset(b, 0, 6 * (size_t)cap * sizeof *b);
             fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
         }
-        if (!shaped) /* spheres only: the original loop */
-            for (int p = lo; p < hi; p++)
-                contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
-        else
-            for (int p = lo; p < hi; p++) {
-                int i = w->pi[p], j = w->pj[p];
-                if ((g->shape[i] & g->shape[j]) < 0) /* both -1: spheres */
-                    contacts += pair_contact(w, p, fx, fy, fz, tx, ty, tz);
-                else
-                    contacts += dem_shaped_pair(w, i, j, w->hist_val[w->hist_cur] + 3 * (size_t)p, fx, fy, fz, tx,
-                                                ty, tz);
-            }
+        for (int p = lo; p < hi; p++) {
+            int i = w->pi[p], j = w->pj[p];
+            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+            if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
+                double f[DEM_PAIR_F];
+                if (pair_force(&pa, p, f)) {
+                    contacts++;
+                    fx[i] += f[0], fy[i] += f[1], fz[i] += f[2];
+                    fx[j] -= f[0], fy[j] -= f[1], fz[j] -= f[2];
+                    tx[i] += f[3], ty[i] += f[4], tz[i] += f[5];
+                    tx[j] += f[6], ty[j] += f[7], tz[j] += f[8];
+                }
+            } else
+                contacts += dem_shaped_pair(w, i, j, xi, fx, fy, fz, tx, ty, tz);
+        }
 #ifdef _OPENMP
 #pragma omp barrier
 #pragma omp for schedule(static)
@@ -1194,56 +1369,96 @@ int dem_step_grains(dem_world *w, cm_error *err)
                 g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
             }
     }
-    w->contacts_gg = contacts;
-    double t1 = cm_now();
-    w->prof.narrow += t1 - t0;
+    return contacts;
+}
 
-    /* Verlet, eqs. 4–5 as predictor/corrector: v(t) = v(t-dt/2) + a(t) dt/2
-     * completes the previous step, v(t+dt/2) = v(t) + a(t) dt/2 predicts, and
-     * x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt + a dt²/2 (eq. 4). Spheres:
-     * ω integrated directly (no gyroscopic term), orientation as a unit
-     * quaternion rotated by ω dt (no Euler-angle singularity, eq. 9 avoided). */
+/* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
+ * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
+ * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
+ * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
+ * orientation as a unit quaternion rotated by ω dt (no Euler-angle
+ * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
+ * since the last rebuild; returns the first slot with a non-finite position,
+ * or INT_MAX. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2_out)
+{
+    double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
+    double *restrict vx = g->vx, *restrict vy = g->vy, *restrict vz = g->vz;
+    double *restrict wx = g->wx, *restrict wy = g->wy, *restrict wz = g->wz;
+    const double *restrict fx = g->fx, *restrict fy = g->fy, *restrict fz = g->fz;
+    const double *restrict tx = g->tx, *restrict ty = g->ty, *restrict tz = g->tz;
+    const double *restrict inv_m = g->inv_m, *restrict inv_i = g->inv_i;
+    const double *restrict x0 = g->x0, *restrict y0 = g->y0, *restrict z0 = g->z0;
+    double *restrict qa = g->q;
+    const unsigned char *restrict frozen = g->frozen;
     double maxd2 = 0.0;
-    int bad = n;
-    const double half = 0.5 * w->skin;
-    double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
-    if (shaped)
-        for (int i = 0; i < n; i++)
-            if (g->shape[i] >= 0)
-                memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
-#ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(max : maxd2) reduction(min : bad)
-#endif
-    for (int i = 0; i < n; i++) {
-        if (g->frozen[i])
+    int bad = INT_MAX;
+    for (int i = lo; i < hi; i++) {
+        if (frozen[i])
             continue;
-        double im = g->inv_m[i], ii = g->inv_i[i];
-        g->vx[i] += g->fx[i] * im * dt;
-        g->vy[i] += g->fy[i] * im * dt;
-        g->vz[i] += g->fz[i] * im * dt;
-        g->wx[i] += g->tx[i] * ii * dt;
-        g->wy[i] += g->ty[i] * ii * dt;
-        g->wz[i] += g->tz[i] * ii * dt;
-        g->x[i] += g->vx[i] * dt;
-        g->y[i] += g->vy[i] * dt;
-        g->z[i] += g->vz[i] * dt;
+        double im = inv_m[i], ii = inv_i[i];
+        vx[i] += fx[i] * im * dt;
+        vy[i] += fy[i] * im * dt;
+        vz[i] += fz[i] * im * dt;
+        wx[i] += tx[i] * ii * dt;
+        wy[i] += ty[i] * ii * dt;
+        wz[i] += tz[i] * ii * dt;
+        x[i] += vx[i] * dt;
+        y[i] += vy[i] * dt;
+        z[i] += vz[i] * dt;
         /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
          * the orientation does not feed back into the forces of spheres */
-        double *q = g->q + 4 * i;
-        double hx = 0.5 * dt * g->wx[i], hy = 0.5 * dt * g->wy[i], hz = 0.5 * dt * g->wz[i];
+        double *q = qa + 4 * (size_t)i;
+        double hx = 0.5 * dt * wx[i], hy = 0.5 * dt * wy[i], hz = 0.5 * dt * wz[i];
         double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
         double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
         double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
         double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
         double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
         q[0] = qw * qn, q[1] = qx * qn, q[2] = qy * qn, q[3] = qz * qn;
-        double ex = g->x[i] - g->x0[i], ey = g->y[i] - g->y0[i], ez = g->z[i] - g->z0[i];
+        double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
         double d2 = ex * ex + ey * ey + ez * ez;
         if (d2 > maxd2)
             maxd2 = d2;
         if (!isfinite(d2) && i < bad)
             bad = i;
     }
+    *maxd2_out = maxd2;
+    return bad;
+}
+
+/* Stage "integrate": integrate_range over the threads, then the rotation
+ * of shaped grains. *maxd2: the largest squared displacement since the last
+ * rebuild; returns the first slot with a non-finite position, or n. */
+static int stage_integrate(dem_world *w, double *maxd2_out)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    const double dt = w->def.dt;
+    const int shaped = w->n_shaped > 0;
+    double maxd2 = 0.0;
+    int bad = INT_MAX;
+    double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
+    if (shaped)
+        for (int i = 0; i < n; i++)
+            if (g->shape[i] >= 0)
+                memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
+    if (nt == 1) {
+        bad = integrate_range(g, 0, n, dt, &maxd2);
+    } else {
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
+#endif
+        {
+            int tid = thread_id();
+            double m2;
+            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2);
+            maxd2 = m2 > maxd2 ? m2 : maxd2;
+            bad = b < bad ? b : bad;
+        }
+    }
+    if (bad > n)
+        bad = n;
     if (shaped) {
         /* Shaped grains: the loop above moved them (translation is the same)
          * but treated their rotation as a sphere's; redo it. Euler's
@@ -1252,7 +1467,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
          * with that L over dt from the saved orientation (NO_SQUISH,
          * dem_shape.h); omega from L at the new orientation. */
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 #endif
         for (int i = 0; i < n; i++) {
             if (g->shape[i] < 0 || g->frozen[i])
@@ -1264,16 +1479,55 @@ int dem_step_grains(dem_world *w, cm_error *err)
             g->wx[i] = om[0], g->wy[i] = om[1], g->wz[i] = om[2];
         }
     }
+    *maxd2_out = maxd2;
+    return bad;
+}
+
+/* The rest of the step after the surface stage: rebuild (if the grains
+ * changed) -> pairs -> gather -> integrate -> rebuild if a grain moved more
+ * than skin/2. */
+int dem_step_grains(dem_world *w, cm_error *err)
+{
+    if (!w->prepared)
+        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
+    double t0 = cm_now();
+    if (w->need_rebuild || !w->adj_valid) {
+        int rc = w->need_rebuild ? neighbour_rebuild(w, err) : pair_adjacency(w, err);
+        if (rc)
+            return rc;
+        double t = cm_now();
+        w->prof.rebuild += t - t0;
+        t0 = t;
+    }
+    if (w->n_shaped > 0) {
+        w->contacts_gg = stage_pairs_shaped(w); /* gathered in it */
+        double t = cm_now();
+        w->prof.pairs += t - t0;
+        t0 = t;
+    } else {
+        w->contacts_gg = stage_pairs(w);
+        double t = cm_now();
+        w->prof.pairs += t - t0;
+        t0 = t;
+        stage_gather(w);
+        t = cm_now();
+        w->prof.gather += t - t0;
+        t0 = t;
+    }
+    double maxd2;
+    int bad = stage_integrate(w, &maxd2);
     w->step++;
-    w->time += dt;
-    double t2 = cm_now();
-    w->prof.integrate += t2 - t1;
-    if (bad < n)
+    w->time += w->def.dt;
+    w->prof.steps++;
+    double t1 = cm_now();
+    w->prof.integrate += t1 - t0;
+    if (bad < w->g.n)
         return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
-                       w->step, w->time, g->id[bad]);
+                       w->step, w->time, w->g.id[bad]);
+    const double half = 0.5 * w->skin;
     if (maxd2 > half * half) {
         int rc = neighbour_rebuild(w, err);
-        w->prof.broad += cm_now() - t2;
+        w->prof.rebuild += cm_now() - t1;
         if (rc)
             return rc;
     }

@@ -39,6 +39,7 @@ typedef struct dem_grains {
     double *x0, *y0, *z0; /* positions at the last neighbour rebuild */
     double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
     uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
+    uint32_t *wall_near; /* bit k: wall k within r + skin at the last neighbour rebuild (valid while walls_near_valid) */
     int *surf_count;   /* surface contacts of the grain in the last step */
     /* non-spherical grains (cold; spheres: shape -1, sc 1) */
     int *shape;        /* shape id, -1 = sphere (the fast path) */
@@ -70,6 +71,19 @@ struct dem_world {
     int n_pairs, pair_cap;
     int n_active_pairs; /* pairs [0, n_active_pairs) have an active grain; the rest (frozen-frozen) are skipped */
     int *pi, *pj;
+    /* narrow phase output, read by the gather (sphere pairs): per active pair
+     * its force on i and the torques on i and j (DEM_PAIR_F doubles), and
+     * whether it touched in this step (nothing is written otherwise) */
+    double *pair_f;
+    unsigned char *pair_on;
+    /* per grain slot, its pairs in list order (CSR over slots: adj_start[i]
+     * .. adj_start[i + 1] in adj_ref, entries 2 p + (1 if the grain is the
+     * pair's j)): the gather adds them in this fixed order, so the sums are
+     * the same for any thread count */
+    int *adj_start, *adj_ref;
+    int pair_buf_cap;   /* pairs pair_f, pair_on and adj_ref have room for */
+    int walls_near_valid; /* g.wall_near is current (0 after grains or walls changed: every wall is tested) */
+    int adj_valid;      /* 0: the list changed (rebuild, checkpoint), adj_* rebuilt before the next pair stage */
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
     int hist_cur;
@@ -103,6 +117,9 @@ struct dem_world {
     double r_min, r_max;
     dem_profile prof;
 };
+
+/* doubles per pair in pair_f: F on i (3), torque on i (3), torque on j (3) */
+#define DEM_PAIR_F 9
 
 /* doubles of scratch per grain: the larger of the wall and surface history */
 #define DEM_SCRATCH_PER_GRAIN                                                                         \

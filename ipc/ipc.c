@@ -35,6 +35,9 @@ struct ipc_channel {
     int send_open, recv_open; /* a begin/recv without its commit/release */
     /* Waiting policy. */
     double stall_timeout, connect_timeout, spin_s;
+    /* adaptive spin budgets (s, 0 < budget <= spin_s): [0] the peer's
+     * frames, [1] free slots and the handshake (wait_sem) */
+    double spin_budget[2];
     volatile sig_atomic_t *stop_flag;
     /* Heartbeat thread. */
     pthread_t heartbeat;
@@ -268,20 +271,38 @@ static int check_peer(ipc_channel *ch, const char *waiting_for)
     return IPC_OK;
 }
 
-/* Waits for a semaphore: spin briefly (a reply often comes within
- * microseconds), then sleep in 20 ms slices, checking the peer between them.
- * deadline_s > 0 bounds the whole wait (handshake); 0 waits as long as the
- * peer lives. */
-static int wait_sem(ipc_channel *ch, sem_t *sem, double deadline_s, const char *what, double *waited)
+/* Shortest spin budget: a peer that answers fast is still noticed (and the
+ * budget grows back) at the cost of a microsecond per wait. */
+#define IPC_SPIN_FLOOR_S 1e-6
+
+/* Waits for a semaphore. A frame that comes within microseconds (the peer
+ * running on the other core) is caught by spinning; a longer wait sleeps in
+ * the semaphore, in 20 ms slices with the peer checked between them.
+ * The spin adapts to how long the waits turn out: its budget (at most
+ * spin_s) halves after each wait the spin did not catch and doubles after
+ * one it did, so that when the peer takes long, or shares our core with a
+ * third process, we sleep almost at once instead of burning the core it
+ * needs. (Yielding the core within the spin, sched_yield, was tried: with
+ * many runnable processes a yield can cost a whole scheduling period, and
+ * the ring's round trip on the loaded machine grew instead of shrinking.)
+ * *budget: the budget of this kind of wait. deadline_s > 0 bounds the
+ * whole wait (handshake); 0 waits as long as the peer lives. */
+static int wait_sem(ipc_channel *ch, sem_t *sem, double *budget, double deadline_s, const char *what,
+                    double *waited)
 {
     double t0 = now_s();
     int rc = IPC_OK;
     if (ch->spin_s > 0) {
-        while (now_s() - t0 < ch->spin_s) {
-            if (sem_trywait(sem) == 0)
+        double limit = *budget, t = t0;
+        while (t - t0 < limit) {
+            if (sem_trywait(sem) == 0) {
+                *budget = fmin(2.0 * *budget, ch->spin_s);
                 goto done;
+            }
             cpu_relax();
+            t = now_s();
         }
+        *budget = fmax(0.5 * *budget, fmin(IPC_SPIN_FLOOR_S, ch->spin_s));
     }
     for (;;) {
         struct timespec ts;
@@ -310,6 +331,31 @@ done:
     if (waited)
         *waited += now_s() - t0;
     return rc;
+}
+
+/* The attach's polls: ready() says whether what we wait for is there (1),
+ * not yet (0) or failed (a negative status, message set). Polled every
+ * sleep_us until it is, the stop flag is raised, or the connect timeout
+ * (from t0) passes: then status late_code with the message `late`. With
+ * watch_peer, the peer is checked between polls too. */
+typedef int (*poll_ready_fn)(ipc_channel *ch, void *arg);
+
+static int poll_until(ipc_channel *ch, double t0, long sleep_us, int watch_peer, poll_ready_fn ready, void *arg,
+                      const char *what, int late_code, const char *late)
+{
+    for (;;) {
+        int r = ready(ch, arg);
+        if (r != 0)
+            return r > 0 ? IPC_OK : r;
+        if (ch->stop_flag && *ch->stop_flag)
+            return set_err(ch, IPC_ERR_INTERRUPTED, "interrupted while waiting for %s", what);
+        if (watch_peer && (r = check_peer(ch, what)) != IPC_OK)
+            return r;
+        if (now_s() - t0 > ch->connect_timeout)
+            return set_err(ch, late_code, "%s", late);
+        struct timespec ts = {0, sleep_us * 1000};
+        nanosleep(&ts, NULL);
+    }
 }
 
 /* ---- creation (FEM side) -------------------------------------------------- */
@@ -403,6 +449,7 @@ int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, c
     ch->stall_timeout = positive_or(def->stall_timeout, 1.0);
     ch->connect_timeout = positive_or(def->connect_timeout, 60.0);
     ch->spin_s = def->spin_us < 0 ? 0 : 1e-6 * positive_or(def->spin_us, 50.0);
+    ch->spin_budget[0] = ch->spin_budget[1] = ch->spin_s;
     ch->stop_flag = def->stop_flag;
 
     ipc_segment_header *h = ch->hdr; /* ftruncate zero-filled it */
@@ -450,7 +497,7 @@ int ipc_accept(ipc_channel *ch)
         return set_err(ch, IPC_ERR_ARG, "ipc_accept is for the FEM side");
     ipc_segment_header *h = ch->hdr;
     atomic_store_explicit(&h->surface_ready, 1, memory_order_release);
-    int rc = wait_sem(ch, &h->sem_hello, ch->connect_timeout, "the DEM's hello", NULL);
+    int rc = wait_sem(ch, &h->sem_hello, &ch->spin_budget[1], ch->connect_timeout, "the DEM's hello", NULL);
     /* The DEM attached (or never will): nobody else needs the name. */
     if (ch->linked) {
         shm_unlink(ch->name);
@@ -576,6 +623,42 @@ static int check_surface(ipc_channel *ch)
     return IPC_OK;
 }
 
+/* What ipc_attach polls for (poll_until). */
+typedef struct attach_poll {
+    const char *name;
+    int fd;
+    struct stat st;
+} attach_poll;
+
+static int segment_exists(ipc_channel *ch, void *arg) /* 1. the FEM side created it */
+{
+    attach_poll *a = arg;
+    a->fd = shm_open(a->name, O_RDWR, 0);
+    if (a->fd >= 0)
+        return 1;
+    return errno == ENOENT ? 0 : set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", a->name, strerror(errno));
+}
+
+static int segment_sized(ipc_channel *ch, void *arg) /* the creator sizes it right after creating it */
+{
+    attach_poll *a = arg;
+    if (fstat(a->fd, &a->st) != 0)
+        return set_err(ch, IPC_ERR_SYS, "fstat %s: %s", a->name, strerror(errno));
+    return (size_t)a->st.st_size >= sizeof(ipc_segment_header);
+}
+
+static int header_published(ipc_channel *ch, void *arg) /* 2. the creator stores the magic last */
+{
+    (void)arg;
+    return atomic_load_explicit(&ch->hdr->magic, memory_order_acquire) == IPC_MAGIC;
+}
+
+static int surface_published(ipc_channel *ch, void *arg) /* 4. the FEM side's surface */
+{
+    (void)arg;
+    return atomic_load_explicit(&ch->hdr->surface_ready, memory_order_acquire) != 0;
+}
+
 int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, char *err, size_t errlen)
 {
     *out = NULL;
@@ -595,33 +678,20 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
     ch->stall_timeout = positive_or(def->stall_timeout, 1.0);
     ch->connect_timeout = positive_or(def->connect_timeout, 60.0);
     ch->spin_s = def->spin_us < 0 ? 0 : 1e-6 * positive_or(def->spin_us, 50.0);
+    ch->spin_budget[0] = ch->spin_budget[1] = ch->spin_s;
     ch->stop_flag = def->stop_flag;
     uint32_t my_version = def->version ? def->version : IPC_VERSION;
     double t0 = now_s();
     int rc = IPC_OK;
 
     /* 1. Wait for the FEM side to create the segment (either may start first). */
-    int fd;
-    for (;;) {
-        fd = shm_open(name, O_RDWR, 0);
-        if (fd >= 0)
-            break;
-        if (errno != ENOENT) {
-            rc = set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", name, strerror(errno));
-            goto fail;
-        }
-        if (ch->stop_flag && *ch->stop_flag) {
-            rc = set_err(ch, IPC_ERR_INTERRUPTED, "interrupted while waiting for segment %s", name);
-            goto fail;
-        }
-        if (now_s() - t0 > ch->connect_timeout) {
-            rc = set_err(ch, IPC_ERR_TIMEOUT, "no FEM peer created segment %s within %.1f s", name,
-                         ch->connect_timeout);
-            goto fail;
-        }
-        struct timespec ts = {0, 2 * 1000 * 1000};
-        nanosleep(&ts, NULL);
-    }
+    char late[600];
+    attach_poll ap = {.name = name, .fd = -1};
+    snprintf(late, sizeof late, "no FEM peer created segment %s within %.1f s", name, ch->connect_timeout);
+    rc = poll_until(ch, t0, 2000, 0, segment_exists, &ap, "the segment", IPC_ERR_TIMEOUT, late);
+    if (rc)
+        goto fail;
+    int fd = ap.fd;
     struct stat st;
     if (fstat(fd, &st) != 0) {
         rc = set_err(ch, IPC_ERR_SYS, "fstat %s: %s", name, strerror(errno));
@@ -635,21 +705,13 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
         close(fd);
         goto fail;
     }
-    /* The creator sizes the segment right after creating it; wait for that. */
-    while ((size_t)st.st_size < sizeof(ipc_segment_header)) {
-        if (now_s() - t0 > ch->connect_timeout) {
-            rc = set_err(ch, IPC_ERR_SIZE, "%s is %lld bytes, too small for a header", name, (long long)st.st_size);
-            close(fd);
-            goto fail;
-        }
-        struct timespec ts = {0, 2 * 1000 * 1000};
-        nanosleep(&ts, NULL);
-        if (fstat(fd, &st) != 0) {
-            rc = set_err(ch, IPC_ERR_SYS, "fstat %s: %s", name, strerror(errno));
-            close(fd);
-            goto fail;
-        }
+    snprintf(late, sizeof late, "%s is too small for a header", name);
+    rc = poll_until(ch, t0, 2000, 0, segment_sized, &ap, "the segment's size", IPC_ERR_SIZE, late);
+    if (rc) {
+        close(fd);
+        goto fail;
     }
+    st = ap.st;
     size_t file_size = (size_t)st.st_size;
     void *p = mmap(NULL, file_size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     close(fd);
@@ -663,15 +725,10 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
     ipc_segment_header *h = ch->hdr;
 
     /* 2. Wait for the magic: the creator stores it last. */
-    while (atomic_load_explicit(&h->magic, memory_order_acquire) != IPC_MAGIC) {
-        if (now_s() - t0 > ch->connect_timeout) {
-            rc = set_err(ch, IPC_ERR_STALE, "%s has no valid header (bad magic): not a segment of this protocol",
-                         name);
-            goto fail;
-        }
-        struct timespec ts = {0, 2 * 1000 * 1000};
-        nanosleep(&ts, NULL);
-    }
+    snprintf(late, sizeof late, "%s has no valid header (bad magic): not a segment of this protocol", name);
+    rc = poll_until(ch, t0, 2000, 0, header_published, NULL, "the segment's header", IPC_ERR_STALE, late);
+    if (rc)
+        goto fail;
     rc = check_header(ch, file_size, my_version, def->expect_nodes);
     if (rc)
         goto fail;
@@ -696,16 +753,10 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
         goto fail;
 
     /* 4. Wait for the surface, then check it. */
-    while (!atomic_load_explicit(&h->surface_ready, memory_order_acquire)) {
-        rc = check_peer(ch, "the interface surface");
-        if (!rc && now_s() - t0 > ch->connect_timeout)
-            rc = set_err(ch, IPC_ERR_TIMEOUT, "FEM peer did not publish its surface within %.1f s",
-                         ch->connect_timeout);
-        if (rc)
-            goto fail;
-        struct timespec ts = {0, 1 * 1000 * 1000};
-        nanosleep(&ts, NULL);
-    }
+    snprintf(late, sizeof late, "FEM peer did not publish its surface within %.1f s", ch->connect_timeout);
+    rc = poll_until(ch, t0, 1000, 1, surface_published, NULL, "the interface surface", IPC_ERR_TIMEOUT, late);
+    if (rc)
+        goto fail;
     rc = check_surface(ch);
     if (rc) {
         record_failure(ch, ch->err);
@@ -717,7 +768,7 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
     h->dem_dt = def->dt;
     h->dem_exchange_every = def->exchange_every;
     sem_post(&h->sem_hello);
-    rc = wait_sem(ch, &h->sem_ack, ch->connect_timeout, "the FEM's answer to our hello", NULL);
+    rc = wait_sem(ch, &h->sem_ack, &ch->spin_budget[1], ch->connect_timeout, "the FEM's answer to our hello", NULL);
     if (rc)
         goto fail;
     if (atomic_load(&h->state) != IPC_STATE_RUNNING) {
@@ -782,7 +833,7 @@ int ipc_send_begin(ipc_channel *ch, ipc_frame_head **head, double **payload)
         return rc;
     char what[96];
     snprintf(what, sizeof what, "a free slot for exchange %llu", (unsigned long long)ch->send_seq);
-    rc = wait_sem(ch, &ch->hdr->sem_empty[ch->peer], 0, what, &ch->stats.wait_send_s);
+    rc = wait_sem(ch, &ch->hdr->sem_empty[ch->peer], &ch->spin_budget[1], 0, what, &ch->stats.wait_send_s);
     if (rc)
         return rc;
     ipc_frame_head *f = slot(ch, ch->peer, ch->send_seq);
@@ -818,7 +869,7 @@ int ipc_recv(ipc_channel *ch, const ipc_frame_head **head, const double **payloa
         return rc;
     char what[96];
     snprintf(what, sizeof what, "exchange %llu", (unsigned long long)ch->recv_seq);
-    rc = wait_sem(ch, &ch->hdr->sem_full[ch->role], 0, what, &ch->stats.wait_recv_s);
+    rc = wait_sem(ch, &ch->hdr->sem_full[ch->role], &ch->spin_budget[0], 0, what, &ch->stats.wait_recv_s);
     if (rc)
         return rc;
     ipc_frame_head *f = slot(ch, ch->role, ch->recv_seq);

@@ -98,7 +98,7 @@ typedef struct ipc_frame_head {
     double time;       /* simulated time of the exchange [s] */
     uint32_t kind;     /* IPC_FRAME_DATA or IPC_FRAME_FINISH */
     uint32_t flags;    /* IPC_FLAG_* */
-    uint64_t checksum; /* FNV-1a 64 of the payload when the segment asks for it, else 0 */
+    uint64_t checksum; /* ipc_checksum of the payload (FNV-1a over 64-bit words) when the segment asks for it, else 0 */
     double info[IPC_INFO_LEN];
     uint8_t pad_[32];  /* to 320 bytes: payloads start 64-byte aligned */
 } ipc_frame_head;
@@ -114,7 +114,8 @@ typedef struct ipc_create_def {
     double exchange_dt;     /* s, the exchange interval this side expects; 0 accepts the DEM's */
     double connect_timeout; /* s to wait for the DEM to attach; 0 -> 60 */
     double stall_timeout;   /* s without a peer heartbeat before it counts as dead; 0 -> 1 */
-    double spin_us;         /* microseconds to spin before sleeping in a wait; <0 -> 0, 0 -> 50 */
+    double spin_us;         /* most microseconds to spin before sleeping in a wait (the spin adapts
+                             * below it: ipc.c wait_sem); <0 -> 0, 0 -> 50 */
     volatile sig_atomic_t *stop_flag; /* optional: waits return IPC_ERR_INTERRUPTED when *stop_flag */
     uint32_t version;       /* protocol version to announce; 0 -> IPC_VERSION (tests only) */
 } ipc_create_def;
@@ -198,7 +199,10 @@ typedef struct ipc_stats {
 } ipc_stats;
 ipc_stats ipc_get_stats(const ipc_channel *ch);
 
-/* FNV-1a 64-bit over bytes, as used for frame checksums. */
+/* The frame checksum: FNV-1a's 64-bit offset basis and prime, applied to the
+ * payload taken as 64-bit words (h = (h ^ word) * prime, words read in the
+ * machine's byte order), then to any tail bytes one by one. Not the bytewise
+ * FNV-1a: 8x faster, and the same on both sides of the ring. */
 uint64_t ipc_checksum(const void *data, size_t len);
 
 #endif

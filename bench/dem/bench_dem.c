@@ -62,6 +62,18 @@ static int make_world(int threads, const char *dir, dem_world **w, cm_error *err
     return dem_bed_build(*w, &p, NULL, NULL, &loaded, err);
 }
 
+/* The step's stages (dem_profile) and their shares of the step's time. */
+static void print_profile(const dem_profile *p)
+{
+    double tot = p->rebuild + p->surface + p->pairs + p->gather + p->integrate;
+    if (!(tot > 0))
+        tot = 1;
+    printf("profile: rebuild %.3f s (%.1f %%) surface %.3f s (%.1f %%) pairs %.3f s (%.1f %%) gather %.3f s (%.1f %%) "
+           "integrate %.3f s (%.1f %%)\n",
+           p->rebuild, 100 * p->rebuild / tot, p->surface, 100 * p->surface / tot, p->pairs, 100 * p->pairs / tot,
+           p->gather, 100 * p->gather / tot, p->integrate, 100 * p->integrate / tot);
+}
+
 /* The stirring velocity of grain id (deterministic). */
 static void stir_velocity(int id, double v[3])
 {
@@ -178,8 +190,7 @@ static int run_shapes(const char *dir, int threads, int steps, int n, cm_error *
                    "%.4f m\n",
                    kind ? "angular" : "spheres", threads, dem_grain_count(w), steps, t, s.contacts_gg + s.contacts_gw,
                    s.contacts_gg, s.profile.rebuilds, dem_bed_height(w));
-            printf("profile: broad %.3f s narrow %.3f s exchange %.3f s integrate %.3f s\n", s.profile.broad,
-                   s.profile.narrow, s.profile.exchange, s.profile.integrate);
+            print_profile(&s.profile);
             printf("%s_grain_steps_per_s %.6g\n", kind ? "angular" : "spheres", rate[kind]);
         }
         dem_world_destroy(&w);
@@ -218,8 +229,14 @@ int main(int argc, char **argv)
                 stir_velocity(i, v);
                 dem_grain_set(w, i, NULL, v, NULL);
             }
-        for (int k = 0; k < 200 && rc == CM_OK; k++) /* warm-up (as LIGGGHTS' "run 200") */
+        /* warm-up (as LIGGGHTS' "run 200"); DEM_BENCH_WARMUP overrides it
+         * (e.g. 0 for a callgrind count of the timed steps alone) */
+        const char *wu = getenv("DEM_BENCH_WARMUP");
+        int warmup = wu ? atoi(wu) : 200;
+        for (int k = 0; k < warmup && rc == CM_OK; k++)
             rc = dem_step(w, &err);
+        dem_stats s0;
+        dem_world_stats(w, &s0);
         double t0 = cm_now();
         for (int k = 0; k < steps && rc == CM_OK; k++)
             rc = dem_step(w, &err);
@@ -227,11 +244,12 @@ int main(int argc, char **argv)
         if (rc == CM_OK) {
             dem_stats s;
             dem_world_stats(w, &s);
+            /* rebuilds of the timed steps only, as LIGGGHTS' "Neighbor list builds" of its last run */
             printf("threads %d steps %d wall_s %.4f contacts %d rebuilds %ld\n", threads, steps, t,
-                   s.contacts_gg + s.contacts_gw, s.profile.rebuilds);
-            printf("profile: broad %.3f s narrow %.3f s exchange %.3f s integrate %.3f s\n", s.profile.broad,
-                   s.profile.narrow, s.profile.exchange, s.profile.integrate);
+                   s.contacts_gg + s.contacts_gw, s.profile.rebuilds - s0.profile.rebuilds);
+            print_profile(&s.profile);
             printf("grain_steps_per_s %.6g\n", (double)dem_grain_count(w) * steps / t);
+            printf("dem_world_hash %016llx\n", (unsigned long long)dem_world_hash(w));
         }
     } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "shapes") == 0) {
         rc = run_shapes(argv[2], atoi(argv[3]), atoi(argv[4]), argc == 6 ? atoi(argv[5]) : 1500, &err);

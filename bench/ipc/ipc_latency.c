@@ -4,7 +4,14 @@
  *
  * One exchange = DEM sends S bytes of forces, FEM answers 2 S bytes of
  * positions and velocities (the protocol's ratio). Both ends write every
- * byte they send and read every byte they receive, on both transports. */
+ * byte they send and read every byte they receive, on both transports.
+ *
+ * usage: ipc_latency [CSV] [--busy N] [--max-bytes B] [--iters-div K]
+ *   --busy N       N extra processes spinning in a busy loop for the whole
+ *                  run (a loaded machine: more runnable threads than cores),
+ *                  stopped by their pids at the end
+ *   --max-bytes B  largest payload (default 2 MB)
+ *   --iters-div K  K times fewer round trips per size (a loaded machine) */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -195,23 +202,58 @@ static double pipe_roundtrip(uint32_t nodes, int iters)
     return t;
 }
 
+/* A busy process: burns its core until killed. */
+static void busy_loop(void)
+{
+    volatile unsigned long x = 0;
+    for (;;)
+        x++;
+}
+
 int main(int argc, char **argv)
 {
-    const char *csv = argc > 1 ? argv[1] : NULL;
+    const char *csv = NULL;
+    int busy = 0;
+    size_t max_bytes = 2u * 1024 * 1024;
+    int iters_div = 1;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "--busy") == 0 && i + 1 < argc)
+            busy = atoi(argv[++i]);
+        else if (strcmp(argv[i], "--max-bytes") == 0 && i + 1 < argc)
+            max_bytes = (size_t)atol(argv[++i]);
+        else if (strcmp(argv[i], "--iters-div") == 0 && i + 1 < argc)
+            iters_div = atoi(argv[++i]) > 0 ? atoi(argv[i]) : 1;
+        else if (argv[i][0] != '-')
+            csv = argv[i];
+        else {
+            fprintf(stderr, "usage: %s [CSV] [--busy N] [--max-bytes B] [--iters-div K]\n", argv[0]);
+            return 2;
+        }
+    }
+    pid_t busy_pid[64];
+    if (busy > 64)
+        busy = 64;
+    for (int k = 0; k < busy; k++) {
+        busy_pid[k] = fork();
+        if (busy_pid[k] == 0)
+            busy_loop();
+    }
     FILE *f = csv ? fopen(csv, "w") : NULL;
     if (csv && !f) {
         fprintf(stderr, "cannot write %s: %s\n", csv, strerror(errno));
         return 1;
     }
     if (f)
-        fprintf(f, "payload_bytes,ring_roundtrip_us,pipe_roundtrip_us,ratio_ring_over_pipe\n");
+        fprintf(f, "payload_bytes,busy_processes,ring_roundtrip_us,pipe_roundtrip_us,ratio_ring_over_pipe\n");
     printf("%12s %14s %14s %10s\n", "payload [B]", "ring [us]", "pipe [us]", "ring/pipe");
     int worst_ok = 1;
-    for (size_t bytes = 1024; bytes <= 2u * 1024 * 1024; bytes *= 2) {
+    for (size_t bytes = 1024; bytes <= max_bytes; bytes *= 2) {
         uint32_t nodes = (uint32_t)(bytes / 24);
         if (nodes < 3)
             nodes = 3;
-        int iters = bytes <= 16384 ? 20000 : bytes <= 262144 ? 2000 : 300;
+        int iters = (bytes <= 16384 ? 20000 : bytes <= 262144 ? 2000 : 300) / iters_div;
+        if (iters < 20)
+            iters = 20;
         /* Median of three runs per transport, interleaved, to tame the noise. */
         double r[3], p[3];
         for (int k = 0; k < 3; k++) {
@@ -223,16 +265,24 @@ int main(int argc, char **argv)
         double ring = MED3(r), pip = MED3(p);
         if (ring < 0 || pip < 0) {
             fprintf(stderr, "benchmark failed at %zu bytes\n", bytes);
+            for (int k = 0; k < busy; k++)
+                kill(busy_pid[k], SIGKILL), waitpid(busy_pid[k], NULL, 0);
             return 1;
         }
         size_t payload = (size_t)nodes * 24;
         printf("%12zu %14.2f %14.2f %10.3f\n", payload, 1e6 * ring, 1e6 * pip, ring / pip);
         if (f)
-            fprintf(f, "%zu,%.3f,%.3f,%.4f\n", payload, 1e6 * ring, 1e6 * pip, ring / pip);
+            fprintf(f, "%zu,%d,%.3f,%.3f,%.4f\n", payload, busy, 1e6 * ring, 1e6 * pip, ring / pip);
         worst_ok &= ring <= pip;
     }
     if (f)
         fclose(f);
+    for (int k = 0; k < busy; k++) {
+        kill(busy_pid[k], SIGKILL);
+        waitpid(busy_pid[k], NULL, 0);
+    }
+    if (busy)
+        printf("(with %d busy processes)\n", busy);
     printf("ring %s the pipe at every size\n", worst_ok ? "is at least as fast as" : "is NOT always faster than");
     return 0;
 }

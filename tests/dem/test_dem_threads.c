@@ -1,0 +1,113 @@
+/* The step's stages and thread counts: the narrow phase stores each pair's
+ * force and the gather adds them per grain in pair-list order, so a run
+ * gives the same bits with 1, 2 or 3 OpenMP threads (Box2D's determinism
+ * test: the final state hashed across thread counts). */
+#include <stdlib.h>
+
+#include "test_dem_common.h"
+#include "timer.h"
+
+/* A loose bed of n grains dropped on a floor (dem_bed_place), optionally
+ * with every grain stirred, and optionally a triangulated plane under it
+ * (the surface stage), stepped `steps` times with `threads` threads. */
+static int run_bed(int threads, int n, int steps, int stirred, int surface, uint64_t *hash, dem_stats *st,
+                   double *wall_s)
+{
+    dem_material m = test_material(5e6, 0.3, 0.3, 0.5);
+    m.rolling_friction = 0.05; /* the rolling torque enters the pair's torques too */
+    double g[3] = {0, 0, -9.81};
+    dem_world *w = test_world(&m, 1, 4e-5, n, g, threads);
+    ENSURE(w);
+    cm_error err = {0};
+    dem_bed_params p = dem_bed_params_default();
+    double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.04, 0.2};
+    memcpy(p.box_min, lo, sizeof lo);
+    memcpy(p.box_max, hi, sizeof hi);
+    p.n_layers = 2;
+    p.layers[0].count = n / 2;
+    p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
+    p.layers[1].count = n - n / 2;
+    p.layers[1].radius[0] = 1.8e-3, p.layers[1].radius[1] = 2.0e-3;
+    const double walls[5][6] = {{0, 0, 0, 0, 0, 1},    {0, 0, 0, 1, 0, 0},    {0.04, 0, 0, -1, 0, 0},
+                                {0, 0, 0, 0, 1, 0},    {0, 0.04, 0, 0, -1, 0}};
+    for (int k = 0; k < 5; k++)
+        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
+    if (surface) { /* a tilted triangulated plane 5 mm above the floor */
+        const int nx = 8;
+        const double s = 0.05 / nx;
+        double *x = malloc(sizeof(double) * 3 * (nx + 1) * (nx + 1));
+        int *t = malloc(sizeof(int) * 6 * nx * nx);
+        ENSURE(x && t);
+        test_plane_mesh(nx, nx, s, -0.005, -0.005, 0.005, x, t);
+        for (int k = 0; k < (nx + 1) * (nx + 1); k++)
+            x[3 * k + 2] += 0.1 * x[3 * k];
+        ENSURE_MSG(dem_surface_set(w, (nx + 1) * (nx + 1), x, 2 * nx * nx, t, 0, &err) == 0, "%s", err.msg);
+        free(x);
+        free(t);
+    }
+    if (stirred)
+        for (int id = 0; id < dem_grain_count(w); id++) {
+            double v[3] = {0.3 * sin(id), 0.3 * cos(1.7 * id), -0.2}, om[3] = {50 * cos(id), 0, 20 * sin(3 * id)};
+            dem_grain_set(w, id, NULL, v, om);
+        }
+    double t0 = cm_now();
+    for (int k = 0; k < steps; k++)
+        ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
+    *wall_s = cm_now() - t0;
+    *hash = dem_world_hash(w);
+    dem_world_stats(w, st);
+    dem_world_destroy(&w);
+    return 0;
+}
+
+static int same_bits_for_thread_counts(int stirred, int surface)
+{
+    uint64_t h[3];
+    dem_stats st[3];
+    double wall;
+    for (int t = 0; t < 3; t++)
+        ENSURE(run_bed(t + 1, 400, 1500, stirred, surface, &h[t], &st[t], &wall) == 0);
+    printf("hash with 1, 2, 3 threads: %016llx %016llx %016llx; %d grain-grain contacts, %d grain-wall, %d "
+           "grain-surface, %ld rebuilds\n",
+           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], st[0].contacts_gg,
+           st[0].contacts_gw, st[0].contacts_gs, st[0].profile.rebuilds);
+    /* the scene must exercise what it claims: pairs in contact and rebuilds */
+    ENSURE(st[0].contacts_gg > 50);
+    ENSURE(st[0].profile.rebuilds > 5);
+    ENSURE(!surface || st[0].contacts_gs > 0);
+    ENSURE(h[0] == h[1]);
+    ENSURE(h[0] == h[2]);
+    return 0;
+}
+
+static int same_bits_1_2_3_threads(void) { return same_bits_for_thread_counts(0, 0); }
+static int same_bits_stirred(void) { return same_bits_for_thread_counts(1, 0); }
+static int same_bits_with_surface(void) { return same_bits_for_thread_counts(1, 1); }
+
+/* The profile counts every step and its stages add up to no more than the
+ * steps' wall time measured outside the world (each stage is a part of it). */
+static int profile_covers_the_step(void)
+{
+    uint64_t h;
+    dem_stats st;
+    double wall;
+    ENSURE(run_bed(2, 400, 300, 1, 1, &h, &st, &wall) == 0);
+    const dem_profile *p = &st.profile;
+    double sum = p->rebuild + p->surface + p->pairs + p->gather + p->integrate;
+    printf("300 steps in %.4f s: rebuild %.4f surface %.4f pairs %.4f gather %.4f integrate %.4f (sum %.4f s), %ld "
+           "rebuilds\n",
+           wall, p->rebuild, p->surface, p->pairs, p->gather, p->integrate, sum, p->rebuilds);
+    ENSURE(p->steps == 300);
+    ENSURE(p->rebuilds >= 1);
+    ENSURE(p->rebuild > 0 && p->surface > 0 && p->pairs > 0 && p->gather > 0 && p->integrate > 0);
+    ENSURE(sum <= wall);
+    return 0;
+}
+
+static const test_case tests[] = {{"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
+                                  {"same_bits_stirred", same_bits_stirred},
+                                  {"same_bits_with_surface", same_bits_with_surface},
+                                  {"profile_covers_the_step", profile_covers_the_step}};
+
+int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

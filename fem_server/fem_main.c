@@ -28,11 +28,11 @@
 #include "drive.h"
 #include "fem.h"
 #include "fem_checkpoint.h"
+#include "fem_summary.h" /* [traction] */
 #include "h5io.h"
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
-#include "steady.h"
 #include "timer.h"
 
 /* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
@@ -112,58 +112,7 @@ static int set_wheel(fem_model *m, const drive_state *ds, cm_error *err)
     return fem_set_wheel(m, &w, err);
 }
 
-static void print_summary_line(const char *name, const double *x, size_t n, size_t start)
-{
-    steady_stats st;
-    steady_summary(x, n, start, &st);
-    cm_log_info("  %-4s mean %9.2f N  (95%% CI +-%7.2f N, %d batches)  min %9.2f  max %9.2f", name, st.mean,
-                st.half_width, st.batches, st.min, st.max);
-}
-
 static const char *const k_control_names[] = {"slip", "torque", "drawbar"};
-
-/* The traction summary over the steady part of the travel. Under torque or
- * drawbar control the slip is the outcome and settles too: the steady part
- * starts where both the drawbar pull and the slip are steady. */
-static void print_traction_summary(const drive_def *d, const series_buf *tr, double interval)
-{
-    size_t start = steady_start(tr->col[SER_TP], tr->n);
-    if (d->control != DRIVE_CONTROL_SLIP) {
-        size_t s_slip = steady_start(tr->col[SER_SLIP], tr->n);
-        start = s_slip > start ? s_slip : start;
-    }
-    char what[160];
-    if (d->control == DRIVE_CONTROL_SLIP)
-        snprintf(what, sizeof what, "slip %.1f %%", 100 * d->slip);
-    else if (d->control == DRIVE_CONTROL_TORQUE)
-        snprintf(what, sizeof what, "axle torque %g N m at v = %g m/s", d->torque, d->velocity);
-    else
-        snprintf(what, sizeof what, "drawbar load %g N at omega = %g rad/s", d->drawbar, d->omega);
-    cm_log_info("traction over the steady part of the travel: from exchange %zu of %zu (t = %.3f s after "
-                "travel began), %s",
-                start, tr->n, (double)start * interval, what);
-    print_summary_line("T_H", tr->col[SER_TH], tr->n, start);
-    print_summary_line("T_R", tr->col[SER_TR], tr->n, start);
-    print_summary_line("T_P", tr->col[SER_TP], tr->n, start);
-    steady_stats st;
-    steady_summary(tr->col[SER_SINK], tr->n, start, &st);
-    cm_log_info("  sinkage mean %.1f mm (95%% CI +-%.1f mm)", 1e3 * st.mean, 1e3 * st.half_width);
-    if (d->control == DRIVE_CONTROL_SLIP)
-        return;
-    steady_summary(tr->col[SER_SLIP], tr->n, start, &st);
-    cm_log_info("  slip mean %.2f %% (95%% CI +-%.2f %%)  min %.2f %%  max %.2f %% (realised, %s control)",
-                100 * st.mean, 100 * st.half_width, 100 * st.min, 100 * st.max, k_control_names[d->control]);
-    /* The equation of motion's balance: the soil carries what is prescribed. */
-    if (d->control == DRIVE_CONTROL_TORQUE) {
-        steady_summary(tr->col[SER_MY], tr->n, start, &st);
-        cm_log_info("  soil moment about the axle mean %.3f N m (95%% CI +-%.3f N m) against the axle torque %g N m",
-                    st.mean, st.half_width, d->torque);
-    } else {
-        steady_summary(tr->col[SER_FX], tr->n, start, &st);
-        cm_log_info("  soil force along the travel mean %.2f N (95%% CI +-%.2f N) against the drawbar load %g N",
-                    st.mean, st.half_width, d->drawbar);
-    }
-}
 
 static int run(const options *o)
 {
@@ -511,16 +460,21 @@ static int run(const options *o)
                 fmax(fabs(w_fem), fabs(w_dem_last)) > 0 ? 100 * (w_fem - w_dem_last) / fmax(fabs(w_fem), fabs(w_dem_last))
                                                         : 0.0,
                 interval);
-    if (travel.n > 0) {
-        print_traction_summary(&drive, &travel, interval);
-        if (drive.control != DRIVE_CONTROL_SLIP)
-            cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
-                        ds.rate_limited, travel.n);
-    } else {
-        cm_log_info("the wheel never reached the travel phase (target load %g N): no traction summary",
-                    drive.target_load);
-    }
-    cm_log_info("results: %s/traction.csv, %s/wheel.h5", o->out, o->out);
+    /* [traction] The summary, from the recorded series (fem_summary.c). */
+    if ((rc = cm_h5_close(&h5, &err)))
+        goto fail;
+    fem_summary_def sdef = {.out_dir = o->out, .scene = o->scene, .control = drive.control, .motion = drive.motion,
+                            .target_load = drive.target_load, .radius = drive.radius, .interval = interval,
+                            .lug_period = cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0,
+                            .slip = drive.slip, .torque = drive.torque, .drawbar = drive.drawbar,
+                            .fem_state_hash = fem_state_hash(model)};
+    if ((rc = fem_summary_write(&sdef, &err)) < 0)
+        goto fail;
+    /* [/traction] */
+    if (travel.n > 0 && drive.control != DRIVE_CONTROL_SLIP)
+        cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
+                    ds.rate_limited, travel.n);
+    cm_log_info("results: %s/traction.csv, %s/wheel.h5, %s/summary.json", o->out, o->out, o->out);
     cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(model));
     exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
     clean_stop = 1;

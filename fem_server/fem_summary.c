@@ -11,14 +11,14 @@
 #include "steady.h"
 
 /* Columns read from wheel.h5:/series. */
-enum { C_T, C_PHASE, C_ANGLE, C_FZ, C_TH, C_TR, C_TP, C_SINK, C_SLIP, C_X, NC };
-static const char *const k_read[NC] = {"t", "phase", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "x"};
+enum { C_T, C_PHASE, C_ANGLE, C_FZ, C_TH, C_TR, C_TP, C_SINK, C_SLIP, C_X, C_MY, NC };
+static const char *const k_read[NC] = {"t", "phase", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "x", "My"};
 
 /* Reported quantities, in this order. */
-enum { Q_TH, Q_TR, Q_TP, Q_W, Q_SINK, Q_SLIP, Q_CTH, Q_CTR, Q_CTP, Q_SINK_R, NQ };
-static const char *const k_names[NQ] = {"T_H",       "T_R",       "T_P",       "load",          "sinkage",
-                                        "slip",      "T_H_per_W", "T_R_per_W", "T_P_per_W",     "sinkage_per_R"};
-static const char *const k_units[NQ] = {"N", "N", "N", "N", "m", "1", "1", "1", "1", "1"};
+enum { Q_TH, Q_TR, Q_TP, Q_W, Q_SINK, Q_SLIP, Q_CTH, Q_CTR, Q_CTP, Q_SINK_R, Q_THM, NQ };
+static const char *const k_names[NQ] = {"T_H",       "T_R",       "T_P",       "load",          "sinkage",   "slip",
+                                        "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R", "T_H_torque"};
+static const char *const k_units[NQ] = {"N", "N", "N", "N", "m", "1", "1", "1", "1", "1", "N"};
 enum { NSTAT = 8, PROFILE_BINS = 24 };
 static const char *const k_stat_names = "mean,half_width,sd,min,max,tau_s,batches,short_series";
 
@@ -46,7 +46,7 @@ static int read_series(const char *path, double **col, size_t *n, cm_error *err)
                 rc = cm_fail(err, CM_ERR_PARSE, "%s: column %s", path, k_read[k]);
         if (rc == CM_OK && H5Dread(ds, mt, H5S_ALL, H5S_ALL, H5P_DEFAULT, rows) < 0)
             rc = cm_fail(err, CM_ERR_PARSE, "%s: /series lacks one of the columns t, phase, angle, Fz, T_H, T_R, T_P, "
-                                           "sinkage, slip, x",
+                                           "sinkage, slip, x, My",
                          path);
     }
     for (int k = 0; k < NC && rc == CM_OK; k++) {
@@ -212,6 +212,10 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
     r->q[Q_SINK_R] = r->q[Q_SINK];
     r->q[Q_SINK_R].mean /= d->radius, r->q[Q_SINK_R].half_width /= d->radius, r->q[Q_SINK_R].sd /= d->radius;
     r->q[Q_SINK_R].min /= d->radius, r->q[Q_SINK_R].max /= d->radius;
+    /* the first paper's gross traction from the axle torque: T_H = -M_y / R_T */
+    for (size_t i = 0; i < m; i++)
+        tr[C_MY][i] = -tr[C_MY][i] / d->radius;
+    steady_summary(tr[C_MY], end, start, &r->q[Q_THM]);
     /* the lug-periodic signal */
     static const int pcol[] = {C_TH, C_TR, C_TP, C_FZ, C_SINK};
     double pm[PROFILE_BINS];

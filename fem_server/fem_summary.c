@@ -137,6 +137,10 @@ typedef struct summary_result {
     double t_start, t_end, travel_m, lug_periods;
     steady_stats q[NQ];
     double profile[PROFILE_BINS][6]; /* phase, T_H, T_R, T_P, load, sinkage */
+    /* convergence with travel: the first quarter, half, three quarters and
+     * all of the steady part; travel (m), then mean and half-width of T_H,
+     * T_R, T_P, load, sinkage */
+    double conv[4][11];
     char warning[600];
 } summary_result;
 
@@ -227,6 +231,17 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
         for (int b = 0; b < PROFILE_BINS; b++)
             r->profile[b][1 + k] = pc[b] ? pm[b] : NAN;
     }
+    for (int f = 0; f < 4; f++) {
+        size_t e = start + (size_t)((double)(end - start) * (f + 1) / 4.0);
+        e = e > end ? end : e;
+        r->conv[f][0] = e > start ? fabs(tr[C_X][e - 1] - tr[C_X][start]) : 0;
+        for (int k = 0; k < 5; k++) {
+            steady_stats cs;
+            steady_summary(tr[pcol[k]], e, start, &cs);
+            r->conv[f][1 + 2 * k] = cs.mean;
+            r->conv[f][2 + 2 * k] = cs.half_width;
+        }
+    }
     /* the load check */
     if (d->target_load > 0 && fabs(W - d->target_load) > 0.10 * d->target_load) {
         if (d->motion == DRIVE_SINK_TRAVEL)
@@ -300,6 +315,7 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
                attr_string(g, "load_warning", r->warning);
         if (r->travelled)
             bad |= write_matrix(g, "quantities", &rows[0][0], NQ, NSTAT) ||
+                   write_matrix(g, "convergence", &r->conv[0][0], 4, 11) ||
                    attr_string(g, "names", names) || write_matrix(g, "lug_profile", &r->profile[0][0], PROFILE_BINS, 6);
         hid_t q = r->travelled ? H5Dopen2(g, "quantities", H5P_DEFAULT) : -1;
         if (q >= 0) {
@@ -369,6 +385,19 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
             if (k)
                 fputs(", ", f);
             json_num(f, r->profile[b][k]);
+        }
+        fputc(']', f);
+    }
+    fputs("]},\n  \"convergence\": {\"columns\": [\"travel_m\", \"T_H\", \"T_H_half_width\", \"T_R\", "
+          "\"T_R_half_width\", \"T_P\", \"T_P_half_width\", \"load\", \"load_half_width\", \"sinkage\", "
+          "\"sinkage_half_width\"], \"rows\": [",
+          f);
+    for (int c = 0; r->travelled && c < 4; c++) {
+        fputs(c ? ", [" : "[", f);
+        for (int k = 0; k < 11; k++) {
+            if (k)
+                fputs(", ", f);
+            json_num(f, r->conv[c][k]);
         }
         fputc(']', f);
     }

@@ -14,6 +14,13 @@
  *   wheel.h5:/summary/lug_profile  the lug-periodic signal: per phase bin
  *                                  (rows), phase then T_H, T_R, T_P, load,
  *                                  sinkage
+ *   wheel.h5:/summary/convergence  how the means and intervals converge with
+ *                                  travel: over the first 1/4, 1/2, 3/4 and all
+ *                                  of the steady part, travel (m) then mean and
+ *                                  half-width of T_H, T_R, T_P, load, sinkage
+ *                                  (the half-width shrinks as 1/sqrt(travel)
+ *                                  once batches are long enough: choose the
+ *                                  travel a target needs from it)
  *   summary.json                   the same, for scripts (bench/post)
  * Quantities: T_H, T_R, T_P (N), load W = Fz (N), sinkage (m), slip, and per
  * actual load the coefficients T_H/W, T_R/W, T_P/W (ratio of the means,

@@ -158,6 +158,10 @@ static int summary_of_synthetic_run(void)
     hid_t ds = H5Dopen2(f, "/summary/quantities", H5P_DEFAULT);
     ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, q) >= 0);
     H5Dclose(ds);
+    double conv[4][11];
+    ds = H5Dopen2(f, "/summary/convergence", H5P_DEFAULT);
+    ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, conv) >= 0);
+    H5Dclose(ds);
     hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
     hid_t at = H5Aopen(g, "steady_start_time", H5P_DEFAULT);
     ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &t_start) >= 0);
@@ -183,6 +187,14 @@ static int summary_of_synthetic_run(void)
     ENSURE_NEAR(q[10][0], q[0][0], 1e-9);              /* T_H from the axle torque, -M_y / R */
     ENSURE(q[2][5] > 0.5 * 39 * dt && q[2][5] < 2 * 39 * dt); /* tau of AR(0.95) = 39 samples */
     ENSURE_MSG(strstr(warn, "sink_travel") && strstr(warn, "150"), "%s", warn);
+    /* convergence with travel: the full stretch is the summary's; the
+     * half-width of T_P shrinks about as 1/sqrt(travel) (x 1/2 from a
+     * quarter to all, within the intervals' own scatter) */
+    ENSURE_NEAR(conv[3][5], q[2][0], 1e-12);
+    ENSURE_NEAR(conv[3][6], q[2][1], 1e-12);
+    ENSURE(conv[0][0] > 0.2 * conv[3][0] && conv[0][0] < 0.3 * conv[3][0]);
+    ENSURE_MSG(conv[3][6] / conv[0][6] > 0.3 && conv[3][6] / conv[0][6] < 0.75, "quarter %g, all %g", conv[0][6],
+               conv[3][6]);
     /* summary.json beside it says the same */
     char jpath[256], buf[8192];
     snprintf(jpath, sizeof jpath, "%s/summary.json", dir);

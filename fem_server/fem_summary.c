@@ -11,14 +11,15 @@
 #include "steady.h"
 
 /* Columns read from wheel.h5:/series. */
-enum { C_T, C_PHASE, C_ANGLE, C_FZ, C_TH, C_TR, C_TP, C_SINK, C_SLIP, C_X, C_MY, NC };
-static const char *const k_read[NC] = {"t", "phase", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "x", "My"};
+enum { C_T, C_PHASE, C_ANGLE, C_FZ, C_TH, C_TR, C_TP, C_SINK, C_SLIP, C_X, C_MY, C_FX, NC };
+static const char *const k_read[NC] = {"t", "phase", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "x", "My", "Fx"};
 
 /* Reported quantities, in this order. */
-enum { Q_TH, Q_TR, Q_TP, Q_W, Q_SINK, Q_SLIP, Q_CTH, Q_CTR, Q_CTP, Q_SINK_R, Q_THM, NQ };
-static const char *const k_names[NQ] = {"T_H",       "T_R",       "T_P",       "load",          "sinkage",   "slip",
-                                        "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R", "T_H_torque"};
-static const char *const k_units[NQ] = {"N", "N", "N", "N", "m", "1", "1", "1", "1", "1", "N"};
+enum { Q_TH, Q_TR, Q_TP, Q_W, Q_SINK, Q_SLIP, Q_CTH, Q_CTR, Q_CTP, Q_SINK_R, Q_THM, Q_FX, Q_MY, NQ };
+static const char *const k_names[NQ] = {"T_H",       "T_R",       "T_P",       "load",          "sinkage",
+                                        "slip",      "T_H_per_W", "T_R_per_W", "T_P_per_W",     "sinkage_per_R",
+                                        "T_H_torque", "Fx",       "My"};
+static const char *const k_units[NQ] = {"N", "N", "N", "N", "m", "1", "1", "1", "1", "1", "N", "N", "N m"};
 enum { NSTAT = 8, PROFILE_BINS = 24 };
 static const char *const k_stat_names = "mean,half_width,sd,min,max,tau_s,batches,short_series";
 
@@ -46,7 +47,7 @@ static int read_series(const char *path, double **col, size_t *n, cm_error *err)
                 rc = cm_fail(err, CM_ERR_PARSE, "%s: column %s", path, k_read[k]);
         if (rc == CM_OK && H5Dread(ds, mt, H5S_ALL, H5S_ALL, H5P_DEFAULT, rows) < 0)
             rc = cm_fail(err, CM_ERR_PARSE, "%s: /series lacks one of the columns t, phase, angle, Fz, T_H, T_R, T_P, "
-                                           "sinkage, slip, x, My",
+                                           "sinkage, slip, x, My, Fx",
                          path);
     }
     for (int k = 0; k < NC && rc == CM_OK; k++) {
@@ -216,6 +217,10 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
     r->q[Q_SINK_R] = r->q[Q_SINK];
     r->q[Q_SINK_R].mean /= d->radius, r->q[Q_SINK_R].half_width /= d->radius, r->q[Q_SINK_R].sd /= d->radius;
     r->q[Q_SINK_R].min /= d->radius, r->q[Q_SINK_R].max /= d->radius;
+    /* the soil's force along the travel and moment about the axle: under
+     * drawbar or torque control they balance what is prescribed */
+    steady_summary(tr[C_FX], end, start, &r->q[Q_FX]);
+    steady_summary(tr[C_MY], end, start, &r->q[Q_MY]);
     /* the first paper's gross traction from the axle torque: T_H = -M_y / R_T */
     for (size_t i = 0; i < m; i++)
         tr[C_MY][i] = -tr[C_MY][i] / d->radius;
@@ -278,11 +283,15 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
     for (int q = 0; q < NQ; q++) {
         const steady_stats *s = &r->q[q];
         double scale = q == Q_SINK ? 1e3 : q == Q_SLIP ? 100 : 1;
-        const char *unit = q == Q_SINK ? "mm" : q == Q_SLIP ? "%" : k_units[q][0] == 'N' ? "N" : "";
+        const char *unit = q == Q_SINK ? "mm" : q == Q_SLIP ? "%" : q == Q_MY ? "Nm" : k_units[q][0] == 'N' ? "N" : "";
         cm_log_info("  %-4s mean %10.4g %-2s (95%% CI +-%9.3g; time sd %9.3g; tau %.3g s, %d batches%s)", k_names[q],
                     scale * s->mean, unit, scale * s->half_width, scale * s->sd, s->tau * d->interval, s->batches,
                     s->short_series ? ": SHORT, rough interval" : "");
     }
+    if (d->control == DRIVE_CONTROL_TORQUE)
+        cm_log_info("  soil moment about the axle %.3f N m against the axle torque %g N m", r->q[Q_MY].mean, d->torque);
+    else if (d->control == DRIVE_CONTROL_DRAWBAR)
+        cm_log_info("  soil force along the travel %.2f N against the drawbar load %g N", r->q[Q_FX].mean, d->drawbar);
     if (r->warning[0])
         cm_log_warn("%s", r->warning);
 }

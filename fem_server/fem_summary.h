@@ -25,8 +25,10 @@
  * Quantities: T_H, T_R, T_P (N), load W = Fz (N), sinkage (m), slip, and per
  * actual load the coefficients T_H/W, T_R/W, T_P/W (ratio of the means,
  * interval by linearisation: batch means of (T - c W)/mean W),
- * sinkage/R and T_H_torque = -M_y / R (the first paper's gross traction
- * from the axle torque). The run warns, naming the cause, when the steady load is more
+ * sinkage/R, T_H_torque = -M_y / R (the first paper's gross traction
+ * from the axle torque), and the soil's force Fx along the travel and
+ * moment My about the axle (under drawbar or torque control they balance
+ * the prescribed load). The run warns, naming the cause, when the steady load is more
  * than 10 % from target_load. */
 #ifndef FEM_SUMMARY_H
 #define FEM_SUMMARY_H

@@ -124,13 +124,14 @@ static int summary_of_synthetic_run(void)
     ENSURE(mkdtemp(dir));
     char path[256];
     snprintf(path, sizeof path, "%s/wheel.h5", dir);
-    static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My"};
+    static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My",
+                                       "Fx"};
     cm_error err = {0};
     cm_h5 *h5 = NULL;
     cm_h5_series *ser = NULL;
     cm_h5_def def = cm_h5_default_def();
     ENSURE_MSG(cm_h5_create(path, &def, &h5, &err) == 0, "%s", err.msg);
-    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 11, NULL, &ser, &err) == 0, "%s", err.msg);
+    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 12, NULL, &ser, &err) == 0, "%s", err.msg);
     enum { SINK = 500, N = 20000 };
     const double dt = 1e-4, v = 0.5, R = 0.3, W_true = 150.0, TP_true = -12.0, S_true = 0.04;
     uint64_t s = 99;
@@ -141,8 +142,8 @@ static int summary_of_synthetic_run(void)
         e1 = 0.95 * e1 + gauss(&s), e2 = 0.95 * e2 + gauss(&s), e3 = 0.9 * e3 + gauss(&s);
         double sink = S_true - (travel ? 0.015 * exp(-tt / 0.1) : 0.02) + 1e-4 * e3;
         double load = W_true + 5.0 * e1, tp = TP_true + 2.0 * e2;
-        double row[11] = {i * dt, travel ? DRIVE_TRAVEL : DRIVE_SINK, v * tt, -v * tt / (R * 0.9), load,
-                          30 + tp / 2, -30 + tp / 2, tp, sink, 0.1, -R * (30 + tp / 2)};
+        double row[12] = {i * dt, travel ? DRIVE_TRAVEL : DRIVE_SINK, v * tt, -v * tt / (R * 0.9), load,
+                          30 + tp / 2, -30 + tp / 2, tp, sink, 0.1, -R * (30 + tp / 2), tp};
         ENSURE_MSG(cm_h5_series_append(ser, row, &err) == 0, "%s", err.msg);
     }
     ENSURE(cm_h5_close(&h5, &err) == 0);
@@ -154,7 +155,7 @@ static int summary_of_synthetic_run(void)
     /* read it back */
     hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
     ENSURE(f >= 0);
-    double q[11][8], t_start = 0;
+    double q[13][8], t_start = 0;
     hid_t ds = H5Dopen2(f, "/summary/quantities", H5P_DEFAULT);
     ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, q) >= 0);
     H5Dclose(ds);
@@ -185,6 +186,8 @@ static int summary_of_synthetic_run(void)
     ENSURE(fabs(q[8][0] - TP_true / W_true) <= q[8][1]);
     ENSURE_NEAR(q[9][0], q[4][0] / R, 1e-12);          /* sinkage / R */
     ENSURE_NEAR(q[10][0], q[0][0], 1e-9);              /* T_H from the axle torque, -M_y / R */
+    ENSURE_NEAR(q[11][0], q[2][0], 1e-12);             /* Fx, here = T_P */
+    ENSURE_NEAR(q[12][0], -R * q[0][0], 1e-9);         /* My */
     ENSURE(q[2][5] > 0.5 * 39 * dt && q[2][5] < 2 * 39 * dt); /* tau of AR(0.95) = 39 samples */
     ENSURE_MSG(strstr(warn, "sink_travel") && strstr(warn, "150"), "%s", warn);
     /* convergence with travel: the full stretch is the summary's; the

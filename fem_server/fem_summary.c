@@ -288,6 +288,11 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
                     scale * s->mean, unit, scale * s->half_width, scale * s->sd, s->tau * d->interval, s->batches,
                     s->short_series ? ": SHORT, rough interval" : "");
     }
+    if (d->control != DRIVE_CONTROL_SLIP) {
+        const steady_stats *sl = &r->q[Q_SLIP];
+        cm_log_info("  slip mean %.2f %% (95%% CI +-%.2f %%)  min %.2f %%  max %.2f %% (realised, %s control)",
+                    100 * sl->mean, 100 * sl->half_width, 100 * sl->min, 100 * sl->max, k_control[d->control]);
+    }
     if (d->control == DRIVE_CONTROL_TORQUE)
         cm_log_info("  soil moment about the axle %.3f N m against the axle torque %g N m", r->q[Q_MY].mean, d->torque);
     else if (d->control == DRIVE_CONTROL_DRAWBAR)

@@ -70,6 +70,13 @@ struct cm_h5 {
     size_t static_points, cells;
     size_t vertex_ids_len;
 
+    /* The XDMF as last written in full, kept open to append steps: xmf_end
+     * is where its closing tags begin; xmf_ids_len the vertex ids' length
+     * its steps were listed with (a change rewrites it in full). */
+    int xmf_fd;
+    off_t xmf_end;
+    size_t xmf_ids_len;
+
     cm_h5_series *series;
 };
 
@@ -311,6 +318,8 @@ cm_h5_def cm_h5_default_def(void)
 
 static void free_file(cm_h5 *f)
 {
+    if (f->xmf_fd >= 0)
+        close(f->xmf_fd);
     free(f->path);
     free(f->xmf_path);
     free(f->grid_name);
@@ -370,6 +379,7 @@ static int file_new(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_e
         return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
     f->fid = f->lcpl = H5I_INVALID_HID;
     f->gid = H5I_INVALID_HID;
+    f->xmf_fd = -1;
     f->last_step = -1;
     f->xdmf = def.xdmf;
     f->path = strdup(path);
@@ -790,17 +800,40 @@ static void xdmf_step(strbuf *b, const cm_h5 *f, const step_rec *r)
     sb_printf(b, "      </Grid>\n");
 }
 
+static const char k_xdmf_tail[] = "    </Grid>\n  </Domain>\n</Xdmf>\n";
+
+/* Writes all of buf at offset off of fd. */
+static int write_at(int fd, const char *buf, size_t len, off_t off, const char *path, cm_error *err)
+{
+    size_t done = 0;
+    while (done < len) {
+        ssize_t w = pwrite(fd, buf + done, len - done, off + (off_t)done);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w < 0)
+            return cm_fail(err, CM_ERR_IO, "writing %s: %s", path, strerror(errno));
+        done += (size_t)w;
+    }
+    return CM_OK;
+}
+
 /* Writes the whole XDMF to a temporary file, syncs it and renames it over
- * the old one: a reader sees either the old or the new index, never half. */
+ * the old one: a reader sees either the old or the new index, never half.
+ * The new file is then kept open for xdmf_append. */
 static int write_xdmf(cm_h5 *f, cm_error *err)
 {
+    if (f->xmf_fd >= 0) {
+        close(f->xmf_fd);
+        f->xmf_fd = -1;
+    }
     strbuf b = {0};
     sb_printf(&b, "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n");
     sb_printf(&b, "<Xdmf Version=\"3.0\">\n  <Domain>\n");
     sb_printf(&b, "    <Grid Name=\"%s\" GridType=\"Collection\" CollectionType=\"Temporal\">\n", f->grid_name);
     for (size_t i = 0; i < f->nsteps; i++)
         xdmf_step(&b, f, &f->steps[i]);
-    sb_printf(&b, "    </Grid>\n  </Domain>\n</Xdmf>\n");
+    size_t body = b.len;
+    sb_printf(&b, "%s", k_xdmf_tail);
     if (b.oom) {
         free(b.s);
         return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", f->xmf_path);
@@ -817,26 +850,49 @@ static int write_xdmf(cm_h5 *f, cm_error *err)
     if (fd < 0) {
         rc = cm_fail(err, CM_ERR_IO, "cannot create %s: %s", tmp, strerror(errno));
     } else {
-        size_t done = 0;
-        while (done < b.len && rc == CM_OK) {
-            ssize_t w = write(fd, b.s + done, b.len - done);
-            if (w < 0 && errno == EINTR)
-                continue;
-            if (w < 0)
-                rc = cm_fail(err, CM_ERR_IO, "writing %s: %s", tmp, strerror(errno));
-            else
-                done += (size_t)w;
-        }
+        rc = write_at(fd, b.s, b.len, 0, tmp, err);
         if (rc == CM_OK && fsync(fd) != 0)
             rc = cm_fail(err, CM_ERR_IO, "syncing %s: %s", tmp, strerror(errno));
-        if (close(fd) != 0 && rc == CM_OK)
-            rc = cm_fail(err, CM_ERR_IO, "closing %s: %s", tmp, strerror(errno));
         if (rc == CM_OK && rename(tmp, f->xmf_path) != 0)
             rc = cm_fail(err, CM_ERR_IO, "renaming %s to %s: %s", tmp, f->xmf_path, strerror(errno));
-        if (rc != CM_OK)
+        if (rc != CM_OK) {
+            close(fd);
             unlink(tmp);
+        } else { /* the descriptor now names the renamed file */
+            f->xmf_fd = fd;
+            f->xmf_end = (off_t)body;
+            f->xmf_ids_len = f->vertex_ids_len;
+        }
     }
     free(tmp);
+    free(b.s);
+    return rc;
+}
+
+/* Adds the last step to the XDMF: its grid and the closing tags written
+ * over the old closing tags, in one write (no rewrite of the earlier steps:
+ * rewriting the whole index after every step made output time grow with
+ * the square of the steps). Written in place, the index is not atomic as a
+ * full rewrite is; a reader catching the moment of the write sees a
+ * truncated file and reads again, and a process killed mid-write is rare
+ * (one small write) and repaired when the run is resumed (cm_h5_reopen
+ * rewrites it). Falls back to the full rewrite when the shared vertex ids
+ * grew (earlier steps list their length) or nothing is open yet. */
+static int xdmf_append(cm_h5 *f, cm_error *err)
+{
+    if (f->xmf_fd < 0 || f->xmf_ids_len != f->vertex_ids_len)
+        return write_xdmf(f, err);
+    strbuf b = {0};
+    xdmf_step(&b, f, &f->steps[f->nsteps - 1]);
+    size_t step_len = b.len;
+    sb_printf(&b, "%s", k_xdmf_tail);
+    if (b.oom) {
+        free(b.s);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", f->xmf_path);
+    }
+    int rc = write_at(f->xmf_fd, b.s, b.len, f->xmf_end, f->xmf_path, err);
+    if (rc == CM_OK)
+        f->xmf_end += (off_t)step_len;
     free(b.s);
     return rc;
 }
@@ -875,7 +931,7 @@ int cm_h5_step_end(cm_h5 *f, cm_error *err)
     /* vertex ids may have been created or extended by check_step */
     if ((rc = cm_h5_flush(f, err)) != CM_OK)
         return rc;
-    return write_xdmf(f, err);
+    return xdmf_append(f, err);
 }
 
 /* ---- time series -------------------------------------------------------------- */

@@ -17,10 +17,12 @@
  *                         ("Xdmf Reader" and "Xdmf3 Reader") show the points
  *
  * Durability: cm_h5_step_end and cm_h5_series_append flush the file
- * (H5Fflush) before returning, and cm_h5_step_end then rewrites <name>.xmf
- * atomically (temporary file, fsync, rename). A process killed afterwards
- * leaves a file that HDF5 opens, with every completed step and every
- * appended row. H5Fflush hands data to the operating system; it does not
+ * (H5Fflush) before returning, and cm_h5_step_end then appends the step to
+ * <name>.xmf in place (one write of the step and the closing tags over the
+ * old closing tags; the first step, a resumed file and a growth of the
+ * vertex ids rewrite it in full and atomically: temporary file, fsync,
+ * rename). A process killed afterwards leaves a file that HDF5 opens, with
+ * every completed step and every appended row. H5Fflush hands data to the operating system; it does not
  * fsync the .h5, so a power cut may lose the most recent steps.
  *
  * The XDMF refers to datasets as "<basename of the .h5>:/steps/...", so the
@@ -127,7 +129,7 @@ int cm_h5_step_ints(cm_h5 *f, const char *name, cm_h5_center center, const int *
                     cm_error *err);
 
 /* Ends the step: checks it against the XDMF grid (geometry present, row
- * counts), flushes the HDF5 file and rewrites the XDMF atomically. */
+ * counts), flushes the HDF5 file and appends the step to the XDMF. */
 int cm_h5_step_end(cm_h5 *f, cm_error *err);
 
 /* ---- Time series -------------------------------------------------------- */

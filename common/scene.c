@@ -1,5 +1,6 @@
 #include "scene.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <libconfig.h>
 #include <math.h>
@@ -484,6 +485,62 @@ static config_setting_t *parent_for(cm_scene *s, const char *key, const char **l
     return p;
 }
 
+/* Copies an override's value with every integer literal inside [...]
+ * written as a float (10 -> 10.0), quoted strings untouched. */
+static void promote_array_ints(const char *v, char *out, size_t len)
+{
+    size_t o = 0;
+    int depth = 0, quoted = 0;
+    for (const char *p = v; *p && o + 3 < len; p++) {
+        if (quoted) {
+            quoted = !(*p == '"' && p[-1] != '\\');
+        } else if (*p == '"') {
+            quoted = 1;
+        } else if (*p == '[') {
+            depth++;
+        } else if (*p == ']') {
+            depth--;
+        } else if (depth > 0 && (isdigit((unsigned char)*p) || ((*p == '-' || *p == '+') && isdigit((unsigned char)p[1]))) &&
+                   (p == v || strchr("[, \t", p[-1]))) {
+            /* a number token: copy it, and add ".0" unless it has a point or exponent or is hex */
+            const char *q = p + 1;
+            while (*q && !strchr(",] \t", *q))
+                q++;
+            int is_float = 0;
+            for (const char *r = p; r < q; r++)
+                is_float |= *r == '.' || *r == 'e' || *r == 'E' || *r == 'x' || *r == 'X';
+            while (p < q && o + 3 < len)
+                out[o++] = *p++;
+            if (!is_float && o + 3 < len) {
+                out[o++] = '.';
+                out[o++] = '0';
+            }
+            p--;
+            continue;
+        }
+        out[o++] = *p;
+    }
+    out[o] = '\0';
+}
+
+int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err)
+{
+    config_write(&s->cfg, f);
+    if (fflush(f) != 0 || ferror(f))
+        return cm_fail(err, CM_ERR_IO, "%s: writing the resolved scene failed", s->path);
+    return CM_OK;
+}
+
+int cm_scene_print_config(const char *path, FILE *f, cm_error *err)
+{
+    cm_scene *s = NULL;
+    int rc = cm_scene_open(path, &s, err);
+    if (rc == CM_OK)
+        rc = cm_scene_write(s, f, err);
+    cm_scene_close(&s);
+    return rc;
+}
+
 int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err)
 {
     const char *eq = strchr(assignment, '=');
@@ -509,16 +566,32 @@ int cm_scene_set(cm_scene *s, const char *assignment, cm_error *err)
      * does not parse is taken as a string. */
     config_t tmp;
     config_init(&tmp);
-    char text[1100];
+    char text[2200];
     snprintf(text, sizeof text, "v = %s;", value);
     const config_setting_t *src = NULL;
-    if (config_read_string(&tmp, text) && config_setting_length(config_root_setting(&tmp)) == 1)
+    int parsed = config_read_string(&tmp, text);
+    if (!parsed && strchr(value, '[') && strchr(value, '.')) {
+        /* libconfig's arrays hold one scalar type, so [10, 0.0, 0.0] is
+         * refused ("mismatched element type in array"): an integer among
+         * floats is meant as a float. */
+        char promoted[2100];
+        promote_array_ints(value, promoted, sizeof promoted);
+        snprintf(text, sizeof text, "v = %s;", promoted);
+        config_destroy(&tmp);
+        config_init(&tmp);
+        parsed = config_read_string(&tmp, text);
+    }
+    if (parsed && config_setting_length(config_root_setting(&tmp)) == 1)
         src = config_lookup(&tmp, "v");
     bool bare = src == NULL;
     if (bare && strpbrk(value, "\"=;{}()[],#") != NULL) {
+        char why[200];
+        snprintf(why, sizeof why, "%s", config_error_text(&tmp) ? config_error_text(&tmp) : "unknown reason");
         config_destroy(&tmp);
-        return cm_fail(err, CM_ERR_PARSE, "%s: --set %s: the value is not valid libconfig syntax", s->path,
-                       assignment);
+        return cm_fail(err, CM_ERR_PARSE,
+                       "%s: --set %s: the value is not valid libconfig syntax (libconfig: %s); values are numbers "
+                       "(2e-5, 3), true/false, \"strings\", arrays of one type [0.0, 0.1] or lists (...)",
+                       s->path, assignment, why);
     }
 
     int rc = CM_OK;

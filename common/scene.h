@@ -14,6 +14,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "error.h"
 
@@ -61,13 +62,23 @@ void cm_scene_mark_known(cm_scene *s, const char *path);
  * all reading is done. */
 int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *err);
 
+/* Writes the scene as it now stands (the file with every override applied)
+ * in libconfig syntax: what `--print-config` prints, so that scripts read a
+ * resolved scene instead of parsing libconfig and --set themselves. */
+int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err);
+/* --print-config of both servers: opens the scene file (with the registered
+ * overrides), writes it to f and closes it. */
+int cm_scene_print_config(const char *path, FILE *f, cm_error *err);
+
 /* Overrides: "key.path=value", as given by `--set` on the command line, put
  * into the parsed tree before any getter reads it, so the strict readers see
  * an overridden scene exactly as if the file said so (an unknown key is still
  * refused, by cm_scene_check_unknown).
  *
  * The value is libconfig syntax (2e-5, 3, true, "newmark", [0.0, 0.1, 0.2]);
- * a bare word is a string. An existing setting keeps its type where the value
+ * a bare word is a string. libconfig's arrays hold one scalar type: an
+ * integer among floats ([10, 0.0, 0.0]) is taken as a float. A value that
+ * does not parse is refused with libconfig's reason. An existing setting keeps its type where the value
  * fits it (dt=1 into a float key stays a float, name=run3 into a string key is
  * a string); otherwise the value's own type replaces it and the reader judges.
  * A missing key is created, with its missing parent groups. */

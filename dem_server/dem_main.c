@@ -355,7 +355,7 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
-                    "                  [--resume DIR] [--set KEY=VALUE]...\n"
+                    "                  [--resume DIR] [--set KEY=VALUE]... [--print-config]\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");
     return 2;
@@ -364,6 +364,7 @@ static int usage(void)
 int main(int argc, char **argv)
 {
     options o = {0};
+    int print_config = 0;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (strcmp(a, "--scene") == 0 && v)
@@ -378,6 +379,8 @@ int main(int argc, char **argv)
             o.resume = o.out = v, i++;
         else if (strcmp(a, "--standalone") == 0)
             o.standalone = 1;
+        else if (strcmp(a, "--print-config") == 0)
+            print_config = 1;
         else if (strcmp(a, "--set") == 0 && v) {
             cm_error err = {0};
             if (cm_scene_add_override(v, &err)) {
@@ -387,6 +390,13 @@ int main(int argc, char **argv)
             i++;
         } else
             return usage();
+    }
+    if (o.scene && print_config) { /* the resolved scene (file + --set), common/scene.h */
+        cm_error err = {0};
+        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+            return 0;
+        fprintf(stderr, "dem_server: %s\n", err.msg);
+        return 1;
     }
     if (!o.scene || (!o.shm && !o.standalone) || (o.resume && o.standalone))
         return usage();

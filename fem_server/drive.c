@@ -58,8 +58,16 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
     /* What the control prescribes; the keys of the other controls are
      * refused as unused (a scene that sets both slip and torque is wrong). */
     if (d->control == DRIVE_CONTROL_SLIP &&
-        (rc = cm_scene_double_opt(s, "wheel.slip", -DRIVE_SLIP_LIMIT, DRIVE_SLIP_LIMIT, d->slip, &d->slip, err)))
+        ((rc = cm_scene_double_opt(s, "wheel.slip", -DRIVE_SLIP_LIMIT, DRIVE_SLIP_LIMIT, d->slip, &d->slip, err)) ||
+         (rc = cm_scene_double_opt(s, "wheel.slip_end", -DRIVE_SLIP_LIMIT, DRIVE_SLIP_LIMIT, NAN, &d->slip_end,
+                                   err))))
         return rc;
+    d->slip_ramp = d->control == DRIVE_CONTROL_SLIP && !isnan(d->slip_end);
+    if (!d->slip_ramp)
+        d->slip_end = d->slip;
+    else if (!(d->travel_distance > 0))
+        return cm_fail(err, CM_ERR_RANGE, "wheel.slip_end ramps the slip over wheel.travel_distance, which is %g: "
+                       "give the travel a length", d->travel_distance);
     if (d->control != DRIVE_CONTROL_TORQUE &&
         (rc = cm_scene_double_opt(s, "wheel.omega", 1e-6, 1e3, d->omega, &d->omega, err)))
         return rc;
@@ -129,6 +137,15 @@ double drive_slip(double omega, double radius, double v)
     if (v <= wr)
         return wr > 0 ? (wr - v) / wr : 0.0;
     return v > 0 ? (wr - v) / v : 0.0;
+}
+
+double drive_prescribed_slip(const drive_def *d, double travelled)
+{
+    if (!d->slip_ramp)
+        return d->slip;
+    double f = travelled / d->travel_distance;
+    f = f < 0 ? 0 : f > 1 ? 1 : f;
+    return d->slip + (d->slip_end - d->slip) * f;
 }
 
 double drive_realised_slip(const drive_def *d, const drive_state *s)
@@ -214,7 +231,7 @@ static void travel_motion(const drive_def *d, drive_state *s, double dt, int ent
     switch (d->control) {
     case DRIVE_CONTROL_SLIP:
         s->omega = d->omega;
-        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, d->slip);
+        s->velocity[0] = drive_travel_velocity(d->omega, d->radius, drive_prescribed_slip(d, s->travelled));
         return;
     case DRIVE_CONTROL_TORQUE: {
         s->velocity[0] = d->velocity;

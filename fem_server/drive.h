@@ -21,7 +21,15 @@
  * braking s = (omega R - v) / v in (-1, 0), so both stay within [-1, 1].
  *
  * wheel.control decides what is prescribed in the travel phase:
- * "slip" (default): omega and the slip; v follows from s.
+ * "slip" (default): omega and the slip; v follows from s. With
+ *   wheel.slip_end the slip is ramped linearly in the distance travelled,
+ *   from wheel.slip at the start of the travel to slip_end at
+ *   travel_distance: the ramped-slip rig, the whole traction-slip curve in
+ *   one run (real single-wheel testers do the same). Its reading lags the
+ *   steady curve where the soil needs a distance L to build up its force
+ *   (a shear displacement, a contact length): by about K L ds/dx, K the
+ *   slope dF/ds (test_drive.slip_ramp_lag), so the ramp must be slow enough
+ *   that this is below the accuracy wanted.
  * "torque": the travel velocity v and the axle torque T; omega follows from
  *   the wheel's rotational equation  I omega' = T + M_y  (M_y: the grains'
  *   moment about the axle, negative when they resist a driven wheel);
@@ -73,7 +81,9 @@ typedef struct drive_def {
     double load_window;      /* s, time constant of the moving average of the load that
                                 is compared with target_load (DEM forces are noisy) */
     double max_sink;         /* m, fail if the load is not reached after sinking this far */
-    double slip;             /* (-1, 1): the prescribed slip in the travel phase */
+    double slip;             /* (-1, 1): the prescribed slip in the travel phase (its start, with a ramp) */
+    double slip_end;         /* (-1, 1): the slip at travel_distance (wheel.slip_end; slip control) */
+    int slip_ramp;           /* 1: the slip is ramped from slip to slip_end over the travel */
     double omega;            /* rad/s, > 0: wheel angular speed in the travel phase */
     double travel_distance;  /* m, the travel phase ends after this distance */
     drive_control control;   /* "slip" (default), "torque" or "drawbar" */
@@ -145,6 +155,9 @@ void drive_start(const drive_def *d, drive_state *s);
 double drive_travel_velocity(double omega, double radius, double slip);
 /* The slip actually realised by v and omega (same definitions). */
 double drive_slip(double omega, double radius, double v);
+/* The slip slip control prescribes after `travelled` m of travel: wheel.slip,
+ * or with a ramp linear from slip to slip_end over travel_distance. */
+double drive_prescribed_slip(const drive_def *d, double travelled);
 /* The slip of the motion held for the next interval (0 outside the travel). */
 double drive_realised_slip(const drive_def *d, const drive_state *s);
 

@@ -13,6 +13,7 @@
  *   fem_solve_static(model, &err);           K u0 = b0 (sect. 3.3), start state
  *   loop: fem_interface_state(...)           -> DEM
  *         fem_advance(model, f_iface, dt_exchange, &err)   <- DEM forces
+ *         fem_output_due(model, &err)       snapshot every fem.output.every advances
  *   fem_destroy(&model);
  *
  * Units: SI throughout (m, s, kg, N, Pa). Interface arrays are indexed by the
@@ -34,6 +35,10 @@ typedef enum fem_integrator {
     FEM_INTEGRATOR_NEWMARK = 1,  /* average acceleration, unconditionally stable */
     FEM_INTEGRATOR_RIGID = 2     /* no deformation: u = 0 */
 } fem_integrator;
+
+/* The elastic law: eq. 29, or compressible Neo-Hookean with the same
+ * small-strain E and nu (fem_material.h; explicit integrator only). */
+typedef enum fem_material_model { FEM_MATERIAL_LINEAR = 0, FEM_MATERIAL_NEO_HOOKEAN = 1 } fem_material_model;
 typedef enum fem_linear_solver { FEM_LINEAR_CHOLMOD = 0, FEM_LINEAR_CG = 1 } fem_linear_solver;
 
 /* Parametric 165/65 R13 tire. Axle along y, rolling in the x-z plane; the
@@ -60,6 +65,36 @@ typedef struct fem_tire_def {
 
 fem_tire_def fem_tire_def_default(void);
 
+/* Supports and loads by named set (fem_bc.c). A set is one of the mesh's
+ * named sets (rim: nodes; cavity, contact: boundary faces) or a plane of the
+ * mesh's bounding box (xmin ... zmax: the nodes and boundary faces on it). */
+typedef enum fem_set {
+    FEM_SET_RIM, FEM_SET_CAVITY, FEM_SET_CONTACT,
+    FEM_SET_XMIN, FEM_SET_XMAX, FEM_SET_YMIN, FEM_SET_YMAX, FEM_SET_ZMIN, FEM_SET_ZMAX,
+    FEM_SET_COUNT
+} fem_set;
+extern const char *const fem_set_names[FEM_SET_COUNT + 1]; /* NULL-terminated */
+
+enum { FEM_MAX_BC = 16 };
+/* Components fix[a] of every node of the set held at displacement value[a]
+ * (m, rim frame): all three = clamped, one = roller / symmetry plane. */
+typedef struct fem_support {
+    fem_set set;
+    bool fix[3];
+    double value[3];
+} fem_support;
+typedef enum fem_load_type {
+    FEM_LOAD_PRESSURE = 0, /* value[0] Pa, pushing into the body on the set's faces */
+    FEM_LOAD_TRACTION = 1, /* value Pa, a vector on the set's faces */
+    FEM_LOAD_FORCE = 2     /* value N, the total: faces as a uniform traction, else equal per node */
+} fem_load_type;
+typedef struct fem_load {
+    fem_set set;
+    fem_load_type type;
+    double value[3];
+} fem_load;
+typedef enum fem_analysis { FEM_ANALYSIS_STATIC = 0, FEM_ANALYSIS_DYNAMIC = 1 } fem_analysis;
+
 typedef struct fem_config {
     fem_mesh_type mesh;
     fem_tire_def tire;       /* mesh = tire */
@@ -71,6 +106,7 @@ typedef struct fem_config {
     double rho;              /* kg/m^3: 1100 */
     double rayleigh_alpha;   /* 1/s, C = alpha M + beta K: 0 */
     double rayleigh_beta;    /* s: 0 */
+    fem_material_model material_model; /* fem.material.model: linear (default) or neo_hookean (explicit) */
     fem_integrator integrator;
     double dt;               /* s, largest FEM sub-step */
     bool allow_unstable;     /* explicit: accept dt above the computed limit */
@@ -84,6 +120,11 @@ typedef struct fem_config {
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
     int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
     double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
+    int n_supports;          /* 0: the rim set clamped (all three components at 0) */
+    fem_support supports[FEM_MAX_BC];
+    int n_loads;             /* dead loads besides pressure and gravity (rim frame) */
+    fem_load loads[FEM_MAX_BC];
+    fem_analysis analysis;   /* fem_server --fem-only: static solve, or from rest to run.end_time */
 } fem_config;
 
 fem_config fem_config_default(void);
@@ -101,24 +142,25 @@ void fem_destroy(fem_model **m);
 int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err);
 
 /* Solves K u0 = b0 (pressure + gravity, no DEM forces) with the configured
- * solver and makes it the start state (v = 0). */
+ * solver and makes it the start state (v = 0). Without a load (b0 = 0 on
+ * the free dofs) u0 is the prescribed displacement and K is not factorized. */
 int fem_solve_static(fem_model *m, cm_error *err);
 
 /* ---- Interface to the DEM ---------------------------------------------- */
 
-int fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris);
+void fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris);
 /* Reference positions (rim frame, undeformed) of the interface nodes,
  * triangles as index triples into that list (outward, counter-clockwise
  * seen from outside), unit outward normals per triangle. Any output may be
  * NULL. Sizes: x 3*n_nodes, tris 3*n_tris, normals 3*n_tris. */
-int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
+void fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals);
 /* Lumped mass [kg] of each interface node (n_nodes entries); 0 for a fixed
  * (rim) node. The DEM uses it for the two-body contact mass. */
-int fem_interface_masses(const fem_model *m, double *mass);
+void fem_interface_masses(const fem_model *m, double *mass);
 /* Mesh node ids of the interface nodes (n_nodes entries). */
-int fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
+void fem_interface_nodes(const fem_model *m, uint32_t *node_ids);
 /* World-frame positions and velocities now (either may be NULL). */
-int fem_interface_state(const fem_model *m, double *x, double *v);
+void fem_interface_state(const fem_model *m, double *x, double *v);
 
 /* ---- Wheel (rigid) motion ---------------------------------------------- */
 
@@ -138,7 +180,8 @@ void fem_get_wheel(const fem_model *m, fem_wheel *w);
 
 /* Advances by `interval` [s] in n = ceil(interval / dt) equal sub-steps,
  * holding the external interface forces f_iface (3 per interface node,
- * world frame, N; NULL = none) constant. */
+ * world frame, N; NULL = none) constant. Runs the energy and element guards
+ * (fem.check_every); writes no files (fem_output_due does). */
 int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *err);
 
 double fem_time(const fem_model *m);
@@ -183,5 +226,9 @@ const double *fem_displacement(const fem_model *m);
 /* Writes a snapshot (deformed mesh, u, strain, stress incl. e22 and e33)
  * now, whatever output_every says. No-op without an output folder. */
 int fem_write_snapshot(fem_model *m, cm_error *err);
+/* Writes a snapshot when the advances so far are a multiple of
+ * fem.output.every and none was written at this advance yet: call it after
+ * each fem_advance (fem_server's snapshot stage does). */
+int fem_output_due(fem_model *m, cm_error *err);
 
 #endif

@@ -56,6 +56,8 @@ static void visit_run(cm_ckpt *ck, fem_ckpt_run *r)
     cm_ckpt_double(ck, "/run/w_fem", &r->w_fem);
     cm_ckpt_double(ck, "/run/max_force_mismatch", &r->max_force_mismatch);
     cm_ckpt_double(ck, "/run/max_moment_mismatch", &r->max_moment_mismatch);
+    cm_ckpt_double(ck, "/run/work_abs", &r->work_abs);
+    cm_ckpt_double(ck, "/run/work_scale", &r->work_scale);
     cm_ckpt_same_u64(ck, "/run/n_nodes", r->n_nodes, "the number of interface nodes");
     cm_ckpt_f64(ck, "/run/x_prev", r->x_prev, 3 * (size_t)r->n_nodes);
     cm_ckpt_long(ck, "/run/series_rows", &r->series_rows);

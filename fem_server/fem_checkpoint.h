@@ -22,6 +22,7 @@ typedef struct fem_ckpt_run {
     drive_state *drive;
     double w_fem;                  /* J, interface work seen by the FEM */
     double max_force_mismatch, max_moment_mismatch;
+    double work_abs, work_scale;   /* J, the interface-work guard's floor (fem_exchange.c) */
     uint32_t n_nodes;
     double *x_prev;                /* 3 n_nodes: the interface positions last sent */
     size_t travel_n;               /* the travel series for the summary, FEM_CKPT_TRAVEL_COLS columns */

@@ -20,7 +20,10 @@
  *     cells = [20, 2, 2];
  *   };
  *   material = { E = 20.0e6; nu = 0.45; rho = 1100.0;     # Pa, -, kg/m^3 (table 3)
- *                rayleigh_alpha = 0.0; rayleigh_beta = 0.0; };  # 1/s, s (optional)
+ *                rayleigh_alpha = 0.0; rayleigh_beta = 0.0;     # 1/s, s (optional)
+ *                model = "linear" | "neo_hookean"; };  # optional, default linear (eq. 29);
+ *                # neo_hookean: compressible Neo-Hookean with the same small-strain E and nu,
+ *                # explicit integrator only (fem_material.h); the static start stays linear
  *   integrator = "explicit" | "newmark" | "rigid";
  *   dt = 1.0e-5;                # s, largest sub-step
  *   allow_unstable = false;     # explicit: accept dt above the computed limit
@@ -32,6 +35,15 @@
  *   check_every = 10;           # energy-growth guard every N exchanges, element guard (inverted, or
  *   max_strain = 0.5;           #   |strain component| above max_strain) every 10 N; 0 = never
  *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
+ *   # Supports and dead loads by set (optional; sets: rim, cavity, contact, and the planes of the
+ *   # mesh's bounding box xmin, xmax, ymin, ymax, zmin, zmax). Without supports the rim is clamped.
+ *   supports = ( { set = "xmin"; fix = "x"; },                 # roller / symmetry plane
+ *                { set = "rim"; fix = "xyz"; displacement = [0.0, 0.0, 0.001]; } );  # m, prescribed
+ *   loads = ( { set = "xmax"; type = "traction"; value = [1.0e5, 0.0, 0.0]; },       # Pa
+ *             { set = "contact"; type = "force"; value = [0.0, 0.0, -100.0]; },      # N, total
+ *             { set = "cavity"; type = "pressure"; value = 1.0e5; } );               # Pa
+ *   analysis = "static" | "dynamic";  # fem_server --fem-only: the static solve, or from rest
+ *                                     # under the loads to run.end_time (default static)
  */
 #include <stdio.h>
 #include <string.h>
@@ -75,6 +87,71 @@ static int read_int_opt(cm_scene *s, const char *path, long lo, long hi, int def
     long v;
     TRY(cm_scene_int_opt(s, path, lo, hi, def, &v, err));
     *out = (int)v;
+    return CM_OK;
+}
+
+/* fem.supports = ( { set = "xmin"; fix = "x"; displacement = [0.0, 0.0, 0.0]; }, ... ); */
+static int read_supports(cm_scene *s, fem_config *c, cm_error *err)
+{
+    int n = cm_scene_length(s, "fem.supports");
+    if (n > FEM_MAX_BC)
+        return cm_fail(err, CM_ERR_RANGE, "%s: fem.supports: %d entries, at most %d", cm_scene_path(s), n,
+                       FEM_MAX_BC);
+    c->n_supports = n;
+    for (int i = 0; i < n; i++) {
+        fem_support *sp = &c->supports[i];
+        char key[96], fix[16];
+        int k;
+        snprintf(key, sizeof key, "fem.supports.[%d].set", i);
+        TRY(cm_scene_choice(s, key, fem_set_names, &k, err));
+        sp->set = (fem_set)k;
+        snprintf(key, sizeof key, "fem.supports.[%d].fix", i);
+        TRY(cm_scene_string(s, key, fix, sizeof fix, err));
+        memset(sp->fix, 0, sizeof sp->fix);
+        for (const char *q = fix; *q; q++) {
+            const char *at = strchr("xyz", *q);
+            if (!at || !*q || sp->fix[at - "xyz"])
+                return cm_fail(err, CM_ERR_RANGE, "%s: %s = \"%s\": the components to fix, each of x, y, z at most "
+                               "once (\"xyz\" clamps, \"x\" is a roller / symmetry plane normal to x)",
+                               cm_scene_path(s), key, fix);
+            sp->fix[at - "xyz"] = true;
+        }
+        if (!fix[0])
+            return cm_fail(err, CM_ERR_RANGE, "%s: %s is empty: name the components to fix (x, y, z)",
+                           cm_scene_path(s), key);
+        static const double zero[3] = {0.0, 0.0, 0.0};
+        snprintf(key, sizeof key, "fem.supports.[%d].displacement", i);
+        TRY(cm_scene_doubles_opt(s, key, 3, -1e3, 1e3, zero, sp->value, err));
+    }
+    return CM_OK;
+}
+
+/* fem.loads = ( { set = "xmax"; type = "traction"; value = [1e5, 0.0, 0.0]; },
+ *               { set = "cavity"; type = "pressure"; value = 2e5; }, ... ); */
+static int read_loads(cm_scene *s, fem_config *c, cm_error *err)
+{
+    static const char *const types[] = {"pressure", "traction", "force", NULL};
+    int n = cm_scene_length(s, "fem.loads");
+    if (n > FEM_MAX_BC)
+        return cm_fail(err, CM_ERR_RANGE, "%s: fem.loads: %d entries, at most %d", cm_scene_path(s), n, FEM_MAX_BC);
+    c->n_loads = n;
+    for (int i = 0; i < n; i++) {
+        fem_load *ld = &c->loads[i];
+        char key[96];
+        int k;
+        snprintf(key, sizeof key, "fem.loads.[%d].set", i);
+        TRY(cm_scene_choice(s, key, fem_set_names, &k, err));
+        ld->set = (fem_set)k;
+        snprintf(key, sizeof key, "fem.loads.[%d].type", i);
+        TRY(cm_scene_choice(s, key, types, &k, err));
+        ld->type = (fem_load_type)k;
+        snprintf(key, sizeof key, "fem.loads.[%d].value", i);
+        memset(ld->value, 0, sizeof ld->value);
+        if (ld->type == FEM_LOAD_PRESSURE)
+            TRY(cm_scene_double(s, key, -1e12, 1e12, &ld->value[0], err));
+        else
+            TRY(cm_scene_doubles(s, key, 3, -1e12, 1e12, ld->value, err));
+    }
     return CM_OK;
 }
 
@@ -129,6 +206,12 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     TRY(cm_scene_double_opt(s, "fem.material.rayleigh_beta", 0.0, 1.0, 0.0, &c->rayleigh_beta, err));
     TRY(cm_scene_choice(s, "fem.integrator", integrators, &k, err));
     c->integrator = (fem_integrator)k;
+    static const char *const models[] = {"linear", "neo_hookean", NULL};
+    TRY(cm_scene_choice_opt(s, "fem.material.model", models, FEM_MATERIAL_LINEAR, &k, err));
+    c->material_model = (fem_material_model)k;
+    if (c->material_model == FEM_MATERIAL_NEO_HOOKEAN && c->integrator == FEM_INTEGRATOR_NEWMARK)
+        return cm_fail(err, CM_ERR_RANGE, "%s: fem.material.model = \"neo_hookean\" needs fem.integrator = "
+                       "\"explicit\": Newmark's linear solve cannot use it yet", cm_scene_path(s));
     TRY(cm_scene_double(s, "fem.dt", 1e-12, 1.0, &c->dt, err));
     TRY(cm_scene_bool_opt(s, "fem.allow_unstable", false, &c->allow_unstable, err));
     TRY(cm_scene_choice_opt(s, "fem.static_solver", solvers, FEM_LINEAR_CHOLMOD, &k, err));
@@ -151,5 +234,10 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     TRY(read_int_opt(s, "fem.output.every", 0, 1000000000, 0, &c->output_every, err));
     TRY(read_int_opt(s, "fem.check_every", 0, 1000000000, c->check_every, &c->check_every, err));
     TRY(cm_scene_double_opt(s, "fem.max_strain", 1e-6, 100.0, c->max_strain, &c->max_strain, err));
+    TRY(read_supports(s, c, err));
+    TRY(read_loads(s, c, err));
+    static const char *const analyses[] = {"static", "dynamic", NULL};
+    TRY(cm_scene_choice_opt(s, "fem.analysis", analyses, FEM_ANALYSIS_STATIC, &k, err));
+    c->analysis = (fem_analysis)k;
     return CM_OK;
 }

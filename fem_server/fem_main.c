@@ -2,6 +2,8 @@
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
+ *   fem_server --scene FILE --print-config           the resolved scene (file + --set), then exit
+ *   fem_server --scene FILE --fem-only [--out DIR]   the tire model alone (fem.supports, fem.loads)
  *   --resume DIR: continue the run of DIR from its last checkpoint
  *
  * Builds the tire model of the scene's `fem` section, solves the initial
@@ -9,9 +11,11 @@
  * the interface surface, then in lockstep with dem_server: receives the
  * interface forces of exchange n, moves the wheel as the `wheel` section
  * prescribes (sinkage, then travel at slip), advances the deformation over
- * the interval and answers the new interface positions and velocities.
- * Records traction, load, sinkage and energies every exchange and prints the
- * traction summary over the detected steady part at the end.
+ * the interval and answers the new interface positions and velocities: one
+ * fem_exchange() per exchange, a pipeline of timed stages (fem_exchange.h).
+ * Records traction, load, sinkage and energies every exchange; at the end
+ * (finish_run) writes and prints the traction summary (fem_summary.c) over the detected steady part
+ * and the stages' profile, which it also writes to wheel.h5.
  * Checkpoints (ipc/PROTOCOL.md): this side decides when both save the state
  * after an exchange: every run.checkpoint_every, and when either side is
  * interrupted (SIGINT/SIGTERM; the run then ends cleanly). */
@@ -28,11 +32,12 @@
 #include "drive.h"
 #include "fem.h"
 #include "fem_checkpoint.h"
-#include "fem_summary.h" /* [traction] */
+#include "fem_exchange.h"
 #include "h5io.h"
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
+#include "fem_summary.h" /* [traction] */
 #include "timer.h"
 
 /* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
@@ -51,68 +56,118 @@ static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
 
 typedef struct options {
     const char *scene, *shm, *out, *export_mesh, *resume;
+    int print_config, fem_only;
 } options;
 
-/* Columns of the time series (fem.h5:/series and traction.csv). */
-enum {
-    COL_T, COL_PHASE, COL_X, COL_Z, COL_ANGLE, COL_OMEGA, COL_V, COL_SLIP, COL_FX, COL_FY, COL_FZ, COL_MY,
-    COL_TH, COL_TR, COL_TP, COL_CONTACTS, COL_SINKAGE, COL_E_EL, COL_E_KIN, COL_W_DEM, COL_W_FEM, NCOL
-};
-static const char *const k_columns[NCOL] = {
-    "t", "phase", "x", "z", "angle", "omega", "v", "slip", "Fx", "Fy", "Fz", "My",
-    "T_H", "T_R", "T_P", "contacts", "sinkage", "E_elastic", "E_kinetic", "W_dem", "W_fem"};
-
-/* The travel phase's series for the summary (grown by doubling). */
-enum { SER_TH, SER_TR, SER_TP, SER_SINK, SER_SLIP, SER_FX, SER_MY, SER_N };
-_Static_assert(SER_N == FEM_CKPT_TRAVEL_COLS, "the checkpoint keeps every column of the travel series");
-typedef struct series_buf {
-    double *col[SER_N];
-    size_t n, cap;
-} series_buf;
-
-static int series_push(series_buf *b, const double row[SER_N])
+/* The record stage's hook: tire snapshots (fem.h5) every fem.output.every
+ * exchanges. fem_advance itself writes nothing. */
+static int after_advance(fem_model *m, void *user, long exchange, cm_error *err)
 {
-    if (b->n == b->cap) {
-        size_t cap = b->cap ? 2 * b->cap : 4096;
-        for (int k = 0; k < SER_N; k++) {
-            double *p = realloc(b->col[k], cap * sizeof(double));
-            if (!p)
-                return -1;
-            b->col[k] = p;
-        }
-        b->cap = cap;
-    }
-    for (int k = 0; k < SER_N; k++)
-        b->col[k][b->n] = row[k];
-    b->n++;
-    return 0;
-}
-
-static void series_free(series_buf *b)
-{
-    for (int k = 0; k < SER_N; k++)
-        free(b->col[k]);
-}
-
-static void rotation_about_y(double angle, double R[9])
-{
-    double c = cos(angle), s = sin(angle);
-    const double r[9] = {c, 0, s, 0, 1, 0, -s, 0, c};
-    memcpy(R, r, sizeof r);
-}
-
-static int set_wheel(fem_model *m, const drive_state *ds, cm_error *err)
-{
-    fem_wheel w;
-    memset(&w, 0, sizeof w);
-    memcpy(w.center, ds->center, sizeof w.center);
-    rotation_about_y(ds->angle, w.R);
-    memcpy(w.v_center, ds->velocity, sizeof w.v_center);
-    w.omega[1] = ds->omega;
-    return fem_set_wheel(m, &w, err);
+    (void)user;
+    (void)exchange;
+    return fem_output_due(m, err);
 }
 
 static const char *const k_control_names[] = {"slip", "torque", "drawbar"};
+
+/* The end of a coupled run: the summaries of what the run measured. The
+ * machine-readable summary (issue 18, fem_server/steady.c's owner) is
+ * written here too, next to the profile: see the marked line. */
+static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, double lug_period, cm_error *err)
+{
+    const drive_def *drive = c->drive;
+    ipc_stats st = ipc_get_stats(c->ch);
+    cm_log_info("finished: %ld exchanges in %.1f s; waited for the DEM %.1f s", c->n, cm_now() - c->loop_t0,
+                st.wait_recv_s + st.wait_send_s);
+    cm_log_info("conservation: nodal forces vs contact totals differ by at most %.2e (force) and %.2e (moment), "
+                "relative",
+                c->max_force_mismatch, c->max_moment_mismatch);
+    /* The coupling's own error: energy the staggered exchange created (> 0)
+     * or destroyed (< 0) at the interface over the run. */
+    double w_fem = c->w_fem, w_dem = c->w_dem_last, wmax = fmax(fabs(w_fem), fabs(w_dem));
+    cm_log_info("interface work of the grains on the tire: seen by the DEM %.6g J, by the FEM %.6g J; FEM - DEM "
+                "= %.3g J (%.2g %% of the larger), the coupling's own error at exchange interval %.3g s",
+                w_dem, w_fem, w_fem - w_dem, wmax > 0 ? 100 * (w_fem - w_dem) / wmax : 0.0, c->interval);
+    fem_profile_print(&c->prof);
+    int rc = fem_profile_write(&c->prof, h5, err);
+    if (rc || (rc = cm_h5_flush(h5, err)))
+        return rc;
+    /* [traction] The summary, from the recorded series (fem_summary.c):
+     * wheel.h5:/summary and summary.json; logged there. */
+    fem_summary_def sdef = {.out_dir = o->out, .scene = o->scene, .control = drive->control,
+                            .motion = drive->motion, .target_load = drive->target_load, .radius = drive->radius,
+                            .interval = c->interval, .lug_period = lug_period, .slip = drive->slip,
+                            .torque = drive->torque, .drawbar = drive->drawbar,
+                            .fem_state_hash = fem_state_hash(c->model)};
+    if ((rc = fem_summary_write(&sdef, err)) < 0)
+        return rc;
+    /* [/traction] */
+    if (c->travel.n > 0 && drive->control != DRIVE_CONTROL_SLIP)
+        cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
+                    c->ds.rate_limited, c->travel.n);
+    cm_log_info("results: %s/traction.csv, %s/wheel.h5, %s/summary.json", o->out, o->out, o->out);
+    cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(c->model));
+    return CM_OK;
+}
+
+/* --fem-only: the tire model alone, no DEM peer (verification, e.g. a bar
+ * under an end load): the static solve under the scene's supports and
+ * loads, or (fem.analysis = "dynamic") the response from rest to
+ * run.end_time, snapshots every fem.output.every steps. Results in fem.h5
+ * and fem_series.csv. */
+static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_error *err)
+{
+    double end_time = 0;
+    int rc = cm_scene_double_opt(scene, "run.end_time", 0.0, 1e9, 0.0, &end_time, err);
+    if (rc)
+        return rc;
+    if (cfg->analysis == FEM_ANALYSIS_DYNAMIC && !(end_time > 0))
+        return cm_fail(err, CM_ERR_KEY, "%s: fem.analysis = \"dynamic\" needs run.end_time > 0", o->scene);
+    cm_scene_mark_known(scene, "run");
+    cm_scene_mark_known(scene, "coupling");
+    cm_scene_mark_known(scene, "wheel");
+    cm_scene_mark_known(scene, "dem");
+    static const char *const sections[] = {"run", "coupling", "wheel", "fem", "dem", NULL};
+    if ((rc = cm_scene_check_unknown(scene, sections, err)))
+        return rc;
+    snprintf(cfg->output_dir, sizeof cfg->output_dir, "%s", o->out);
+    fem_model *m = NULL;
+    if ((rc = fem_create(cfg, &m, err)))
+        return rc;
+    double t0 = cm_now();
+    if (cfg->analysis == FEM_ANALYSIS_STATIC) {
+        if ((rc = fem_solve_static(m, err)) == CM_OK)
+            rc = fem_write_snapshot(m, err);
+    } else { /* from rest, the loads applied at t = 0 */
+        long steps = 0;
+        rc = fem_write_snapshot(m, err);
+        while (rc == CM_OK && fem_time(m) < end_time * (1 - 1e-12)) {
+            if ((rc = fem_advance(m, NULL, cfg->dt, err)) == CM_OK)
+                rc = fem_output_due(m, err);
+            steps++;
+        }
+        if (rc == CM_OK)
+            cm_log_info("dynamic: %ld steps of %.4g s to t = %.6g s in %.2f s", steps, cfg->dt, fem_time(m),
+                        cm_now() - t0);
+    }
+    if (rc == CM_OK) {
+        int nn, nt;
+        fem_mesh_size(m, &nn, &nt);
+        const double *u = fem_displacement(m);
+        double umax = 0;
+        for (int d = 0; d < 3 * nn; d++)
+            umax = fabs(u[d]) > umax ? fabs(u[d]) : umax;
+        fem_energy en;
+        fem_get_energy(m, &en);
+        cm_log_info("fem-only %s: %d nodes, %d tetrahedra; max |u component| %.6g m, elastic energy %.6g J; results: "
+                    "%s/fem.h5, %s/fem_series.csv",
+                    cfg->analysis == FEM_ANALYSIS_STATIC ? "static" : "dynamic", nn, nt, umax, en.elastic, o->out,
+                    o->out);
+        cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(m));
+    }
+    fem_destroy(&m);
+    return rc;
+}
 
 static int run(const options *o)
 {
@@ -121,16 +176,21 @@ static int run(const options *o)
     fem_model *model = NULL;
     ipc_channel *ch = NULL;
     cm_h5 *h5 = NULL;
-    cm_h5_series *series = NULL;
-    double *x_prev = NULL, *x_now = NULL, *v_now = NULL;
-    series_buf travel = {0};
+    fem_coupled c = {0};
     int exit_code = 1, rc, clean_stop = 0;
 
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
     fem_config cfg = fem_config_default();
-    if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) ||
-        (rc = drive_config_read(scene, &drive, &err)) || (rc = fem_config_read(scene, &cfg, &err)))
+    if (o->fem_only) {
+        if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = fem_config_read(scene, &cfg, &err)) ||
+            (rc = run_fem_only(o, scene, &cfg, &err)))
+            goto fail;
+        exit_code = 0;
+        goto cleanup;
+    }
+    if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
+        (rc = fem_config_read(scene, &cfg, &err)))
         goto fail;
     cm_scene_mark_known(scene, "dem");
     static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
@@ -187,18 +247,30 @@ static int run(const options *o)
         cm_log_info("wheel: vertical damper %.4g N s/m (%.2f of critical on the reference soil stiffness %.3g N/m)",
                     drive.damping, drive.damping / (2.0 * sqrt(DRIVE_SOIL_STIFFNESS_REF * drive.mass)),
                     DRIVE_SOIL_STIFFNESS_REF);
-    drive_state ds;
-    drive_start(&drive, &ds);
-    if ((rc = set_wheel(model, &ds, &err)))
+
+    /* The exchange loop's state. */
+    c.model = model;
+    c.drive = &drive;
+    c.run = &rc_cfg;
+    c.out = o->out;
+    c.scene_hash = scene_hash;
+    c.interval = cm_run_exchange_dt(&rc_cfg);
+    c.hooks = (fem_exchange_hooks){.after_advance = after_advance, .user = NULL};
+    c.interrupt = &g_interrupt;
+    fem_energy en0;
+    fem_get_energy(model, &en0);
+    c.elastic0 = en0.elastic; /* the inflated tire before any grain touches it */
+    drive_start(&drive, &c.ds);
+    if ((rc = fem_set_wheel_motion(model, &c.ds, &err)))
         goto fail;
 
     /* The exchange segment, sized for the interface surface. */
-    uint32_t nn, nt;
-    fem_interface_count(model, &nn, &nt);
+    uint32_t nt;
+    fem_interface_count(model, &c.nn, &nt);
     ipc_create_def def = ipc_default_create_def();
-    def.n_nodes = nn;
+    def.n_nodes = c.nn;
     def.n_tris = nt;
-    def.exchange_dt = cm_run_exchange_dt(&rc_cfg);
+    def.exchange_dt = c.interval;
     def.stall_timeout = rc_cfg.stall_timeout;
     def.connect_timeout = rc_cfg.connect_timeout;
     def.stop_flag = &g_stop;
@@ -208,18 +280,17 @@ static int run(const options *o)
         exit_code = 3;
         goto cleanup;
     }
-    x_prev = malloc(3 * (size_t)nn * sizeof(double));
-    x_now = malloc(3 * (size_t)nn * sizeof(double));
-    v_now = malloc(3 * (size_t)nn * sizeof(double));
-    if (!x_prev || !x_now || !v_now) {
-        cm_fail(&err, CM_ERR_NOMEM, "out of memory for %u interface nodes", nn);
+    c.ch = ch;
+    c.x_prev = malloc(3 * (size_t)c.nn * sizeof(double));
+    if (!c.x_prev) {
+        cm_fail(&err, CM_ERR_NOMEM, "out of memory for %u interface nodes", c.nn);
         goto fail;
     }
     fem_interface_state(model, ipc_surface_nodes(ch), NULL);
     fem_interface_initial(model, NULL, ipc_surface_tris(ch), NULL);
     fem_interface_masses(model, ipc_surface_masses(ch));
-    memcpy(x_prev, ipc_surface_nodes(ch), 3 * (size_t)nn * sizeof(double));
-    cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", nn, nt, o->shm);
+    memcpy(c.x_prev, ipc_surface_nodes(ch), 3 * (size_t)c.nn * sizeof(double));
+    cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", c.nn, nt, o->shm);
     if ((rc = ipc_accept(ch))) {
         if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
             cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_stop);
@@ -229,30 +300,30 @@ static int run(const options *o)
         goto cleanup;
     }
 
-    const double interval = cm_run_exchange_dt(&rc_cfg);
-    double w_fem = 0, max_force_mismatch = 0, max_moment_mismatch = 0;
-    long n = 0, series_rows = 0;
+    long series_rows = 0;
     if (o->resume) {
-        fem_ckpt_run cr = {.drive = &ds, .n_nodes = nn, .x_prev = x_prev};
+        fem_ckpt_run cr = {.drive = &c.ds, .n_nodes = c.nn, .x_prev = c.x_prev};
         rc = fem_checkpoint_read(ckpt_path, resume_exchange, model, &cr, scene_hash, o->out, &err);
         if (rc == CM_OK)
             rc = cm_ckpt_adopt(ckpt_path, &err);
         if (rc == CM_OK) {
-            series_free(&travel);
+            series_free(&c.travel);
             for (int k = 0; k < SER_N; k++)
-                travel.col[k] = cr.travel[k];
-            travel.n = travel.cap = cr.travel_n;
+                c.travel.col[k] = cr.travel[k];
+            c.travel.n = c.travel.cap = cr.travel_n;
         } else {
             for (int k = 0; k < SER_N; k++)
                 free(cr.travel[k]);
         }
-        if (rc || (rc = set_wheel(model, &ds, &err)))
+        if (rc || (rc = fem_set_wheel_motion(model, &c.ds, &err)))
             goto fail;
-        w_fem = cr.w_fem;
-        max_force_mismatch = cr.max_force_mismatch;
-        max_moment_mismatch = cr.max_moment_mismatch;
+        c.w_fem = cr.w_fem;
+        c.max_force_mismatch = cr.max_force_mismatch;
+        c.max_moment_mismatch = cr.max_moment_mismatch;
+        c.work_abs = cr.work_abs;
+        c.work_scale = cr.work_scale;
         series_rows = cr.series_rows;
-        n = resume_exchange + 1;
+        c.n = resume_exchange + 1;
         cm_log_info("resuming from %s after exchange %ld (t = %.6f s)", ckpt_path, resume_exchange, fem_time(model));
     }
 
@@ -262,220 +333,33 @@ static int run(const options *o)
     snprintf(csv, sizeof csv, "%s/traction.csv", o->out);
     cm_h5_def hdef = cm_h5_default_def();
     if (o->resume ? ((rc = cm_h5_reopen(path, &hdef, -1, &h5, &err)) ||
-                     (rc = cm_h5_series_reopen(h5, "/series", k_columns, NCOL, csv, series_rows, &series, &err)))
+                     (rc = cm_h5_series_reopen(h5, "/series", fem_series_columns, fem_series_ncols, csv, series_rows,
+                                               &c.series, &err)))
                   : ((rc = cm_h5_create(path, &hdef, &h5, &err)) ||
-                     (rc = cm_h5_series_create(h5, "/series", k_columns, NCOL, csv, &series, &err))))
+                     (rc = cm_h5_series_create(h5, "/series", fem_series_columns, fem_series_ncols, csv, &c.series,
+                                               &err))))
         goto fail;
 
-    const long ckpt_every = cm_run_checkpoint_exchanges(&rc_cfg);
-    double w_dem_last = 0; /* J, the DEM's interface work in the last frame, for the summary */
-    double last_progress = cm_now(), loop_t0 = cm_now();
-    const long n_first = n;
-    int finished = 0, stop_sent = 0;
+    /* The exchange loop: one fem_exchange() per exchange until the DEM
+     * finishes the run (fem_exchange.c has the stages). */
+    c.last_progress = c.loop_t0 = cm_now();
+    c.n_first = c.n;
     g_graceful = 1; /* from here a signal asks for a checkpoint */
     if (g_interrupt)
         alarm(10);
-    for (;; n++) {
-        const ipc_frame_head *in;
-        const double *f;
-        if ((rc = ipc_recv(ch, &in, &f)))
-            break;
-        if (in->kind == IPC_FRAME_FINISH) {
-            ipc_recv_release(ch);
-            ipc_frame_head *out;
-            double *p;
-            if ((rc = ipc_send_begin(ch, &out, &p)))
-                break;
-            out->kind = IPC_FRAME_FINISH;
-            rc = ipc_send_commit(ch);
-            finished = 1;
-            break;
-        }
-        double time = in->time, info[IPC_INFO_LEN];
-        memcpy(info, in->info, sizeof info);
-        /* A checkpoint of this exchange: periodic, or either side interrupted
-         * (then the run stops after it). Not once the drive is done: the run
-         * ends at the next exchange anyway. */
-        int interrupted = (g_interrupt || (in->flags & IPC_FLAG_CHECKPOINT)) && !stop_sent;
-        int checkpoint = (interrupted || (ckpt_every > 0 && (n + 1) % ckpt_every == 0)) && ds.phase != DRIVE_DONE;
-
-        /* Conservation: nodal forces against the contact totals (eq. 42 keeps
-         * resultant and moment); positions are those the DEM saw, moments
-         * about the world origin as the protocol defines them. */
-        double fs[3] = {0}, ms[3] = {0};
-        for (uint32_t i = 0; i < nn; i++) {
-            const double *fi = f + 3 * i, *r = x_prev + 3 * i;
-            fs[0] += fi[0], fs[1] += fi[1], fs[2] += fi[2];
-            ms[0] += r[1] * fi[2] - r[2] * fi[1];
-            ms[1] += r[2] * fi[0] - r[0] * fi[2];
-            ms[2] += r[0] * fi[1] - r[1] * fi[0];
-        }
-        double fscale = 1e-9 + fabs(info[IPC_INFO_FORCE_X]) + fabs(info[IPC_INFO_FORCE_Y]) +
-                        fabs(info[IPC_INFO_FORCE_Z]);
-        for (int k = 0; k < 3; k++) {
-            double df = fabs(fs[k] - info[IPC_INFO_FORCE_X + k]) / fscale;
-            double dm = fabs(ms[k] - info[IPC_INFO_MOMENT_X + k]) / (fscale * drive.radius);
-            max_force_mismatch = df > max_force_mismatch ? df : max_force_mismatch;
-            max_moment_mismatch = dm > max_moment_mismatch ? dm : max_moment_mismatch;
-        }
-
-        /* Gentle placement: at the first exchange, lower the wheel until its
-         * lowest surface point is start_gap above the highest grain. */
-        double bed = info[IPC_INFO_BED_HEIGHT], bed_top = info[IPC_INFO_BED_TOP];
-        if (n == 0 && drive.start_gap > 0 && bed_top != 0) {
-            double lowest = x_prev[2];
-            for (uint32_t i = 1; i < nn; i++)
-                lowest = x_prev[3 * i + 2] < lowest ? x_prev[3 * i + 2] : lowest;
-            ds.center[2] += bed_top + drive.start_gap - lowest;
-            cm_log_info("bed surface at z = %.4f m (highest grain top %.4f m): wheel lowered to %.1f mm above it",
-                        bed, bed_top, 1e3 * drive.start_gap);
-        }
-
-        /* Advance the tire over the interval with the motion decided last time. */
-        if ((rc = set_wheel(model, &ds, &err)) || (rc = fem_advance(model, f, interval, &err))) {
-            ipc_recv_release(ch);
-            goto fail;
-        }
-        ipc_recv_release(ch);
-        /* The grains' force and their moment about the axle, M_o - c x F
-         * (the centre as it was when the DEM computed them). */
-        double load = info[IPC_INFO_FORCE_Z];
-        const double *c = ds.center;
-        drive_soil soil = {info[IPC_INFO_FORCE_X], load,
-                           info[IPC_INFO_MOMENT_Y] - (c[2] * info[IPC_INFO_FORCE_X] - c[0] * info[IPC_INFO_FORCE_Z])};
-        if ((rc = drive_update(&drive, &ds, time + interval, interval, &soil, &err)))
-            goto fail;
-        if ((rc = set_wheel(model, &ds, &err)))
-            goto fail;
-
-        ipc_frame_head *out;
-        double *p;
-        if ((rc = ipc_send_begin(ch, &out, &p)))
-            break;
-        fem_interface_state(model, p, p + 3 * (size_t)nn);
-        /* Work of the interface forces on the surface as the FEM moved it. */
-        for (size_t j = 0; j < 3 * (size_t)nn; j++)
-            w_fem += f[j] * (p[j] - x_prev[j]);
-        memcpy(x_prev, p, 3 * (size_t)nn * sizeof(double));
-        /* Coupling stability guard: the work of the interface forces seen by
-         * the DEM (f . v dt, velocities it received) and by the FEM (f . dx,
-         * how it moved the nodes) agree to O(dt) while the staggered exchange
-         * is stable; an unstable exchange pumps energy into the tire and the
-         * two diverge long before anything overflows. */
-        double w_dem = info[IPC_INFO_DEM_WORK], gap = fabs(w_fem - w_dem);
-        w_dem_last = w_dem;
-        if (gap > 1.0 && gap > 0.25 * fmax(fabs(w_fem), fabs(w_dem))) {
-            cm_fail(&err, CM_ERR_NUMERIC,
-                    "coupling unstable at t = %.4f s: the interface work seen by the FEM (%.3g J) and by the DEM "
-                    "(%.3g J) diverge. The exchange interval (coupling.dt x coupling.exchange_every = %.3g s) is "
-                    "too long for the grain contacts on the lightest surface nodes: reduce coupling.dt",
-                    time + interval, w_fem, w_dem, interval);
-            goto fail;
-        }
-        out->kind = IPC_FRAME_DATA;
-        out->time = time + interval;
-        memcpy(&out->info[IPC_INFO_CENTER_X], ds.center, 3 * sizeof(double));
-        memcpy(&out->info[IPC_INFO_VEL_X], ds.velocity, 3 * sizeof(double));
-        out->info[IPC_INFO_OMEGA] = ds.omega;
-        out->info[IPC_INFO_ANGLE] = ds.angle;
-        out->info[IPC_INFO_FEM_WORK] = w_fem;
-        if (ds.phase == DRIVE_DONE || interrupted)
-            out->flags |= IPC_FLAG_STOP_REQUEST;
-        stop_sent |= interrupted;
-        checkpoint = checkpoint && ds.phase != DRIVE_DONE;
-        if (checkpoint)
-            out->flags |= IPC_FLAG_CHECKPOINT;
-        if ((rc = ipc_send_commit(ch)))
-            break;
-
-        /* Record. Travel is along +x: T_H pushes the tire forward. My is the
-         * grains' moment about the axle; slip the one realised by the motion
-         * held for the next interval. */
-        fem_energy en;
-        fem_get_energy(model, &en);
-        double th = info[IPC_INFO_TRACTION_POS], tr = info[IPC_INFO_TRACTION_NEG];
-        double sinkage = bed != 0 ? bed - (ds.center[2] - drive.radius) : 0;
-        double slip = drive_realised_slip(&drive, &ds);
-        double row[NCOL] = {time + interval, ds.phase, ds.center[0], ds.center[2], ds.angle, ds.omega,
-                            ds.velocity[0], slip, info[IPC_INFO_FORCE_X], info[IPC_INFO_FORCE_Y],
-                            info[IPC_INFO_FORCE_Z], soil.my, th, tr, th - fabs(tr), info[IPC_INFO_CONTACTS], sinkage,
-                            en.elastic, en.kinetic, info[IPC_INFO_DEM_WORK], w_fem};
-        if ((rc = cm_h5_series_append(series, row, &err)))
-            goto fail;
-        const double travel_row[SER_N] = {th, tr, th - fabs(tr), sinkage, slip, soil.fx, soil.my};
-        if (ds.phase == DRIVE_TRAVEL && series_push(&travel, travel_row)) {
-            cm_fail(&err, CM_ERR_NOMEM, "out of memory recording the traction series");
-            goto fail;
-        }
-        /* Tire snapshots: fem_advance writes one every fem.output.every calls. */
-        if (checkpoint) {
-            fem_ckpt_run cr = {.exchange = n, .drive = &ds, .w_fem = w_fem,
-                               .max_force_mismatch = max_force_mismatch, .max_moment_mismatch = max_moment_mismatch,
-                               .n_nodes = nn, .x_prev = x_prev, .travel_n = travel.n,
-                               .travel = {travel.col[SER_TH], travel.col[SER_TR], travel.col[SER_TP],
-                                          travel.col[SER_SINK], travel.col[SER_SLIP], travel.col[SER_FX],
-                                          travel.col[SER_MY]},
-                               .series_rows = cm_h5_series_rows(series)};
-            double t_ck = cm_now();
-            if ((rc = fem_checkpoint_write(o->out, model, &cr, scene_hash, &err)))
-                goto fail;
-            cm_log_info("checkpoint of exchange %ld written (t = %.6f s, %.2f s)%s", n, time + interval,
-                        cm_now() - t_ck, interrupted ? "; stopping: resume with ./run --resume DIR" : "");
-        }
-
-        double now = cm_now();
-        if (rc_cfg.progress_every > 0 && now - last_progress >= rc_cfg.progress_every) {
-            last_progress = now;
-            double rate = (double)(n + 1 - n_first) / (now - loop_t0);
-            double remaining = (rc_cfg.end_time - (time + interval)) / interval;
-            if (ds.phase == DRIVE_TRAVEL && ds.velocity[0] > 0) {
-                double by_travel = (drive.travel_distance - ds.travelled) / ds.velocity[0] / interval;
-                remaining = by_travel < remaining ? by_travel : remaining;
-            }
-            static const char *const phase_names[] = {"sinkage", "travel", "done", "fixed"};
-            cm_log_info("%-7s t = %.4f s  %6.0f exch/s  ETA %5.0f s  load %8.1f N  T_P %8.1f N  sinkage %6.1f mm"
-                        "  slip %5.1f %%",
-                        phase_names[ds.phase], time + interval, rate, remaining > 0 ? remaining / rate : 0, load,
-                        th - fabs(tr), 1e3 * sinkage, 100 * slip);
-        }
-    }
+    fem_exchange_status st;
+    while ((st = fem_exchange(&c, &err)) == FEM_EXCHANGE_NEXT)
+        ;
     g_graceful = 0;
-    if (!finished) {
+    if (st == FEM_EXCHANGE_FAILED)
+        goto fail;
+    if (st == FEM_EXCHANGE_LINK_LOST) {
         cm_log_error("%s", ipc_error(ch));
         exit_code = g_stop ? 128 + (int)g_stop : 3;
         goto cleanup;
     }
-
-    ipc_stats st = ipc_get_stats(ch);
-    cm_log_info("finished: %ld exchanges in %.1f s; waited for the DEM %.1f s", n, cm_now() - loop_t0,
-                st.wait_recv_s + st.wait_send_s);
-    cm_log_info("conservation: nodal forces vs contact totals differ by at most %.2e (force) and %.2e (moment), "
-                "relative",
-                max_force_mismatch, max_moment_mismatch);
-    /* The coupling's own error: energy the staggered exchange created (> 0)
-     * or destroyed (< 0) at the interface over the run. */
-    cm_log_info("interface work of the grains on the tire: seen by the DEM %.6g J, by the FEM %.6g J; FEM - DEM "
-                "= %.3g J (%.2g %% of the larger), the coupling's own error at exchange interval %.3g s",
-                w_dem_last, w_fem, w_fem - w_dem_last,
-                fmax(fabs(w_fem), fabs(w_dem_last)) > 0 ? 100 * (w_fem - w_dem_last) / fmax(fabs(w_fem), fabs(w_dem_last))
-                                                        : 0.0,
-                interval);
-    /* [traction] The summary, from the recorded series (fem_summary.c). */
-    if ((rc = cm_h5_close(&h5, &err)))
+    if ((rc = finish_run(o, &c, h5, cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0, &err)))
         goto fail;
-    fem_summary_def sdef = {.out_dir = o->out, .scene = o->scene, .control = drive.control, .motion = drive.motion,
-                            .target_load = drive.target_load, .radius = drive.radius, .interval = interval,
-                            .lug_period = cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0,
-                            .slip = drive.slip, .torque = drive.torque, .drawbar = drive.drawbar,
-                            .fem_state_hash = fem_state_hash(model)};
-    if ((rc = fem_summary_write(&sdef, &err)) < 0)
-        goto fail;
-    /* [/traction] */
-    if (travel.n > 0 && drive.control != DRIVE_CONTROL_SLIP)
-        cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
-                    ds.rate_limited, travel.n);
-    cm_log_info("results: %s/traction.csv, %s/wheel.h5, %s/summary.json", o->out, o->out, o->out);
-    cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(model));
     exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
     clean_stop = 1;
     goto cleanup;
@@ -492,10 +376,8 @@ cleanup:
     ipc_close(&ch, exit_code == 0 || clean_stop ? IPC_OK : IPC_ERR_PEER_FAILED);
     fem_destroy(&model);
     cm_scene_close(&scene);
-    series_free(&travel);
-    free(x_prev);
-    free(x_now);
-    free(v_now);
+    series_free(&c.travel);
+    free(c.x_prev);
     return exit_code;
 }
 
@@ -503,10 +385,17 @@ static int usage(void)
 {
     fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
+                    "       fem_server --scene FILE [--set KEY=VALUE]... --print-config\n"
+                    "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
                     "  with the physical groups rim, cavity and contact, and exits.\n"
-                    "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n");
+                    "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n"
+                    "  --print-config prints the scene as resolved (the file with every --set applied) in\n"
+                    "  libconfig syntax on stdout and exits: scripts read settings from it.\n"
+                    "  --fem-only runs the tire model alone, no DEM peer: the static solve under\n"
+                    "  fem.supports and fem.loads, or with fem.analysis = \"dynamic\" the response\n"
+                    "  from rest to run.end_time; results in DIR/fem.h5 and DIR/fem_series.csv.\n");
     return 2;
 }
 
@@ -523,6 +412,10 @@ int main(int argc, char **argv)
             o.out = argv[++i];
         else if (strcmp(argv[i], "--resume") == 0 && i + 1 < argc)
             o.resume = o.out = argv[++i];
+        else if (strcmp(argv[i], "--print-config") == 0)
+            o.print_config = 1;
+        else if (strcmp(argv[i], "--fem-only") == 0)
+            o.fem_only = 1;
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
             o.export_mesh = argv[++i];
         else if (strcmp(argv[i], "--set") == 0 && i + 1 < argc) {
@@ -534,8 +427,15 @@ int main(int argc, char **argv)
         } else
             return usage();
     }
-    if (!o.scene || (!o.shm && !o.export_mesh))
+    if (!o.scene || (!o.shm && !o.export_mesh && !o.print_config && !o.fem_only))
         return usage();
+    if (o.print_config) { /* the scene as resolved: file + --set, libconfig syntax */
+        cm_error err = {0};
+        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+            return 0;
+        fprintf(stderr, "fem_server: %s\n", err.msg);
+        return 1;
+    }
     cm_log_set_tag("fem");
     cm_h5_library_init();
     struct sigaction sa;

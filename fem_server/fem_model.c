@@ -26,6 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fem_bc.h"
 #include "fem_element.h"
 #include "fem_model.h"
 #include "log.h"
@@ -136,9 +137,16 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     rc = fem_solver_create(&m->mesh, cfg->E, cfg->nu, cfg->rho, cfg->rayleigh_alpha, cfg->rayleigh_beta, &m->s, err);
     if (rc)
         goto fail;
-    rc = fem_solver_constrain_rim(m->s, &m->mesh, err);
+    rc = fem_bc_constrain(m->s, &m->mesh, cfg, err);
     if (rc)
         goto fail;
+    if (cfg->material_model == FEM_MATERIAL_NEO_HOOKEAN) {
+        rc = fem_solver_use_neo_hookean(m->s, &m->mesh, err);
+        if (rc)
+            goto fail;
+        cm_log_info("fem: Neo-Hookean rubber (lambda %.4g Pa, mu %.4g Pa) in the explicit steps; the static start "
+                    "and the stability estimate use the small-strain stiffness", m->s->lambda, m->s->mu);
+    }
     m->b_pressure = calloc((size_t)m->s->n_dof, sizeof(double));
     m->u_prev = calloc((size_t)m->s->n_dof, sizeof(double));
     if (!m->b_pressure || !m->u_prev) {
@@ -146,6 +154,8 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
         goto fail;
     }
     fem_load_pressure(&m->mesh, FEM_FACE_CAVITY, cfg->pressure, m->b_pressure);
+    if ((rc = fem_bc_loads(&m->mesh, cfg, m->b_pressure, err)))
+        goto fail;
     rc = build_interface(m, err);
     if (rc)
         goto fail;
@@ -246,36 +256,36 @@ int fem_solve_static(fem_model *m, cm_error *err)
         return CM_OK;
     }
     int iters = 0;
-    double t0 = 0.0;
     int rc = fem_solver_static(m->s, m->s->f, m->cfg.static_solver, m->cfg.cg_tol, m->cfg.cg_max_iter, m->s->u,
                                &iters, err);
     if (rc)
         return cm_fail_prefix(err, "fem static solve (K u0 = b0)");
-    (void)t0;
     fem_solver_set_state(m->s, m->s->u, NULL);
     m->static_done = true;
     double umax = 0.0;
     for (int d = 0; d < m->s->n_dof; d++)
         umax = fabs(m->s->u[d]) > umax ? fabs(m->s->u[d]) : umax;
-    cm_log_info("fem: static solve (%s, %d iterations): max |u0| = %.4g m, elastic energy %.4g J",
-                m->cfg.static_solver == FEM_LINEAR_CHOLMOD ? "cholmod" : "cg", iters, umax,
-                fem_solver_elastic_energy(m->s));
+    if (iters == 0) /* no load: nothing was factorized */
+        cm_log_info("fem: static solve: no load (b0 = 0), u0 = the prescribed displacements (max |u0| = %.4g m)",
+                    umax);
+    else
+        cm_log_info("fem: static solve (%s, %d iterations): max |u0| = %.4g m, elastic energy %.4g J",
+                    m->cfg.static_solver == FEM_LINEAR_CHOLMOD ? "cholmod" : "cg", iters, umax,
+                    fem_solver_elastic_energy(m->s));
     return CM_OK;
 }
 
-int fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris)
+void fem_interface_count(const fem_model *m, uint32_t *n_nodes, uint32_t *n_tris)
 {
     if (n_nodes)
         *n_nodes = m->n_if_nodes;
     if (n_tris)
         *n_tris = m->n_if_tris;
-    return CM_OK;
 }
 
-int fem_interface_nodes(const fem_model *m, uint32_t *ids)
+void fem_interface_nodes(const fem_model *m, uint32_t *ids)
 {
     memcpy(ids, m->if_nodes, m->n_if_nodes * sizeof *ids);
-    return CM_OK;
 }
 
 int fem_write_mesh_gmsh(const fem_model *m, const char *path, cm_error *err)
@@ -296,7 +306,7 @@ void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle)
     *inertia_axle = iy;
 }
 
-int fem_interface_masses(const fem_model *m, double *mass)
+void fem_interface_masses(const fem_model *m, double *mass)
 {
     /* Lumped (row-sum) mass of each interface node, eq. 33; rim nodes are
      * fixed and count as infinitely heavy (0 in the protocol's convention),
@@ -306,10 +316,9 @@ int fem_interface_masses(const fem_model *m, double *mass)
         int moves = m->cfg.integrator != FEM_INTEGRATOR_RIGID && m->s->inv_mass[d] > 0.0;
         mass[k] = moves ? m->s->mass[d] : 0.0;
     }
-    return CM_OK;
 }
 
-int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals)
+void fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double *normals)
 {
     if (x)
         for (uint32_t k = 0; k < m->n_if_nodes; k++)
@@ -327,10 +336,9 @@ int fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double 
             for (int q = 0; q < 3; q++)
                 normals[3 * t + (uint32_t)q] = n[q] / l;
         }
-    return CM_OK;
 }
 
-int fem_interface_state(const fem_model *m, double *x, double *v)
+void fem_interface_state(const fem_model *m, double *x, double *v)
 {
     const fem_wheel *w = &m->wheel;
     for (uint32_t k = 0; k < m->n_if_nodes; k++) {
@@ -350,7 +358,6 @@ int fem_interface_state(const fem_model *m, double *x, double *v)
             v[3 * k + 2] = w->v_center[2] + w->omega[0] * Rr[1] - w->omega[1] * Rr[0] + Rv[2];
         }
     }
-    return CM_OK;
 }
 
 int fem_set_wheel(fem_model *m, const fem_wheel *w, cm_error *err)
@@ -483,14 +490,16 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
         if (rc)
             return rc;
     }
-    if (m->out && m->cfg.output_every > 0 && m->advances % m->cfg.output_every == 0) {
-        int rc = fem_output_snapshot(m->out, m, err);
-        if (!rc)
-            rc = fem_output_series(m->out, m, err);
-        if (rc)
-            return rc;
-    }
     return CM_OK;
+}
+
+int fem_output_due(fem_model *m, cm_error *err)
+{
+    if (!m->out || m->cfg.output_every <= 0 || m->advances % m->cfg.output_every != 0 ||
+        m->advances == m->output_advance)
+        return CM_OK;
+    m->output_advance = m->advances;
+    return fem_write_snapshot(m, err);
 }
 
 int fem_check_energy(const fem_model *m, cm_error *err)

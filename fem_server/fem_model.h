@@ -12,7 +12,8 @@ struct fem_model {
     fem_config cfg;
     fem_mesh mesh;
     fem_solver *s;
-    double *b_pressure;     /* consistent pressure load per dof (rim frame, constant) [N] */
+    double *b_pressure;     /* the dead loads per dof (rim frame, constant) [N]: the inflation pressure and
+                               fem.loads */
     /* DEM interface */
     uint32_t n_if_nodes, n_if_tris;
     uint32_t *if_nodes;     /* mesh node ids */
@@ -23,6 +24,7 @@ struct fem_model {
     bool have_stab;
     bool static_done;
     long advances;
+    long output_advance;    /* advances at the last snapshot fem_output_due wrote (0: none) */
     double max_substep;     /* s, last sub-step used */
     double size;            /* m, bounding-box diagonal of the mesh */
     /* Energy guard: E = E_kin + E_el - b_pressure.u (pressure is conservative)

@@ -38,6 +38,14 @@ typedef struct fem_solver {
     double *w, *tmp;       /* work vectors */
     double time;
     long steps;
+    /* Neo-Hookean rubber (fem_solver_use_neo_hookean; explicit only): the
+     * internal forces from the element loop instead of K u. */
+    bool nh;
+    int n_tets;
+    int32_t *tets;         /* 4 per tet, the mesh's */
+    double (*grad0)[4][3]; /* reference shape-function gradients per tet [1/m] */
+    double *vol0;          /* reference volumes [m^3] */
+    long nh_inverted;      /* element evaluations with det F <= 0 (their forces left out) */
 } fem_solver;
 
 int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double alpha, double beta,
@@ -54,13 +62,21 @@ int fem_solver_constrain_rim(fem_solver *s, const fem_mesh *m, cm_error *err);
 void fem_solver_matvec(const fem_solver *s, const double *x, double *y);
 
 /* K u = b with the constraints: u (all dofs) gets the prescribed values on
- * fixed dofs. CG stops at |r| <= tol |b_free|; iters may be NULL. */
+ * fixed dofs. CG stops at |r| <= tol |b_free|; iters may be NULL. When
+ * b_free - (K u_c)_free = 0 nothing is solved (u = u_c) and *iters = 0. */
 int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
                       double *u, int *iters, cm_error *err);
 
 /* Stable explicit step (see fem_stability in fem.h). */
 int fem_solver_stability(fem_solver *s, const fem_mesh *m, int max_power_iter, fem_stability *st,
                          cm_error *err);
+
+/* Switches the elastic law to compressible Neo-Hookean (fem_material.h)
+ * with the solver's Lame parameters: the explicit step and the elastic
+ * energy then use the element loop (total Lagrangian); K stays the
+ * small-strain stiffness for the static solve, the stability estimate and
+ * the Rayleigh beta damping (C = alpha M + beta K). Newmark refuses it. */
+int fem_solver_use_neo_hookean(fem_solver *s, const fem_mesh *m, cm_error *err);
 
 /* Sets u, v (NULL: zero, prescribed values on fixed dofs) and the
  * acceleration a = M^-1 (f - K u - C v) from the current s->f. */
@@ -73,7 +89,7 @@ int fem_solver_prepare(fem_solver *s, fem_integrator integ, double h, cm_error *
 /* One step of length h (the prepared one for Newmark) with load s->f. */
 int fem_solver_step(fem_solver *s, double h, cm_error *err);
 
-double fem_solver_elastic_energy(const fem_solver *s);  /* 1/2 u^T K u, uses s->tmp */
+double fem_solver_elastic_energy(const fem_solver *s);  /* 1/2 u^T K u (Neo-Hookean: sum V0 W(F)), uses s->tmp */
 double fem_solver_kinetic_energy(const fem_solver *s);  /* 1/2 v^T M v */
 
 #endif

@@ -273,6 +273,69 @@ static int set_applied_by_open(void)
     return 0;
 }
 
+/* An integer among floats in an array ([10, 0.0, 0.0]) is not libconfig
+ * (one scalar type per array): taken as the float it means; a value that
+ * does not parse is refused with libconfig's reason. */
+static int set_int_in_float_array(void)
+{
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(k_scene, "demo.cfg", &s, &err) == CM_OK);
+    ENSURE_MSG(cm_scene_set(s, "dem.gravity=[10, 0.0, -9.81]", &err) == CM_OK, "%s", err.msg);
+    double g[3];
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -20, 20, g, &err) == CM_OK);
+    ENSURE(g[0] == 10.0 && g[1] == 0.0 && g[2] == -9.81);
+    ENSURE_MSG(cm_scene_set(s, "dem.v=[-1, 2.5, +3, 1e2]", &err) == CM_OK, "%s", err.msg);
+    double v[4];
+    ENSURE(cm_scene_doubles(s, "dem.v", 4, -1e3, 1e3, v, &err) == CM_OK);
+    ENSURE(v[0] == -1.0 && v[1] == 2.5 && v[2] == 3.0 && v[3] == 100.0);
+    /* A string among numbers stays wrong, and the message says why. */
+    ENSURE(cm_scene_set(s, "dem.gravity=[1, 2.0, \"a\"]", &err) == CM_ERR_PARSE);
+    ENSURE_MSG(strstr(err.msg, "dem.gravity") && strstr(err.msg, "mismatched element type"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+/* --print-config: the scene written back is the scene with the overrides
+ * applied, and it reads back to the same values (scripts read this, never
+ * the file and the --set list). */
+static int print_config_resolves_overrides(void)
+{
+    char path[] = "/tmp/test_scene_pc_XXXXXX", out[] = "/tmp/test_scene_pc_out_XXXXXX";
+    int fd = mkstemp(path), fo = mkstemp(out);
+    ENSURE(fd >= 0 && fo >= 0);
+    FILE *f = fdopen(fd, "w");
+    ENSURE(f != NULL);
+    fputs(k_scene, f);
+    fclose(f);
+    cm_error err = {0};
+    ENSURE(cm_scene_add_override("run.end_time=0.25", &err) == CM_OK);
+    ENSURE(cm_scene_add_override("dem.gravity=[1, 0.0, -9.81]", &err) == CM_OK);
+    ENSURE(cm_scene_add_override("coupling.dt=2e-5", &err) == CM_OK);
+    FILE *o = fdopen(fo, "w");
+    ENSURE(o != NULL);
+    ENSURE_MSG(cm_scene_print_config(path, o, &err) == CM_OK, "%s", err.msg);
+    fclose(o);
+    cm_scene_clear_overrides();
+    cm_scene *s;
+    ENSURE_MSG(cm_scene_open(out, &s, &err) == CM_OK, "%s", err.msg);
+    double t, dt, g[3], e;
+    char name[32];
+    ENSURE(cm_scene_double(s, "run.end_time", 0, 10, &t, &err) == CM_OK && t == 0.25);
+    ENSURE(cm_scene_double(s, "coupling.dt", 0, 1, &dt, &err) == CM_OK && dt == 2e-5);
+    ENSURE(cm_scene_doubles(s, "dem.gravity", 3, -20, 20, g, &err) == CM_OK && g[0] == 1.0 && g[2] == -9.81);
+    ENSURE(cm_scene_double(s, "dem.E", 0, 1e9, &e, &err) == CM_OK && e == 5e7);
+    ENSURE(cm_scene_string(s, "run.name", name, sizeof name, &err) == CM_OK && strcmp(name, "demo") == 0);
+    ENSURE(cm_scene_length(s, "dem.layers") == 2);
+    cm_scene_close(&s);
+    /* A missing file: an error naming it, nothing printed. */
+    ENSURE(cm_scene_print_config("/nonexistent/scene.cfg", stdout, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "/nonexistent/scene.cfg"), "%s", err.msg);
+    remove(path);
+    remove(out);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"reads_values", reads_values},
     {"missing_key_names_key_and_line", missing_key_names_key_and_line},
@@ -284,6 +347,8 @@ static const test_case tests[] = {
     {"set_overrides_values", set_overrides_values},
     {"set_errors_and_unknown_keys", set_errors_and_unknown_keys},
     {"set_applied_by_open", set_applied_by_open},
+    {"set_int_in_float_array", set_int_in_float_array},
+    {"print_config_resolves_overrides", print_config_resolves_overrides},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -12,11 +12,13 @@
  * and reads `run` and `coupling` like the servers. Every exchange it writes
  * t, Fx, Fy, Fz, contacts (the resultant of the nodal forces on the plate)
  * to DIR/plate.csv, and at the end prints the impulse, the contact duration
- * and the peak of the load (the downward force the grains put on the plate). */
+ * and the peak of the load (the downward force the grains put on the plate).
+ * After its first exchange it writes its pid to DIR/plate_peer.running. */
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "ipc.h"
 #include "runcfg.h"
@@ -24,6 +26,22 @@
 
 static volatile sig_atomic_t g_stop;
 static void on_signal(int sig) { g_stop = sig; }
+
+/* After its first exchange the peer leaves its pid in DIR/plate_peer.running
+ * (written, then renamed into place): a test waits for the file and kills
+ * this process by that pid. */
+static int announce_running(const char *out)
+{
+    char tmp[1100], path[1100];
+    snprintf(tmp, sizeof tmp, "%s/plate_peer.running.tmp", out);
+    snprintf(path, sizeof path, "%s/plate_peer.running", out);
+    FILE *f = fopen(tmp, "w");
+    if (!f)
+        return -1;
+    int ok = fprintf(f, "%d\n", (int)getpid()) > 0;
+    ok = fclose(f) == 0 && ok;
+    return ok && rename(tmp, path) == 0 ? 0 : -1;
+}
 
 int main(int argc, char **argv)
 {
@@ -99,7 +117,7 @@ int main(int argc, char **argv)
     fprintf(csv, "t,Fx,Fy,Fz,contacts\n");
     double impulse = 0, t_first = -1, t_last = -1, f_max = 0;
     const double interval = cm_run_exchange_dt(&rc_cfg);
-    int rc = 0;
+    int rc = 0, announced = 0;
     for (;;) {
         const ipc_frame_head *in;
         const double *f;
@@ -125,6 +143,12 @@ int main(int argc, char **argv)
         }
         if ((rc = ipc_send_commit(ch)) || kind == IPC_FRAME_FINISH)
             break;
+        if (!announced && announce_running(out) != 0) {
+            ipc_fail(ch, "plate_peer: cannot write %s/plate_peer.running", out);
+            rc = IPC_ERR_PEER_FAILED;
+            break;
+        }
+        announced = 1;
         fprintf(csv, "%.9g,%.9g,%.9g,%.9g,%g\n", t, fx, fy, fz, contacts);
         double load = -fz; /* grains push the plate down */
         impulse += load * interval;

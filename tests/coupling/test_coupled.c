@@ -7,7 +7,6 @@
 #include <fcntl.h>
 #include <math.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,9 +15,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "proc.h"
 #include "test.h"
-
-extern char **environ;
 
 #if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR) || !defined(PLATE_PEER_PATH)
 #error "DEMFEM_SOURCE_DIR, DEMFEM_BUILD_DIR and PLATE_PEER_PATH must be defined"
@@ -27,24 +25,18 @@ extern char **environ;
 #define SCENES DEMFEM_SOURCE_DIR "/tests/coupling/scenes/"
 
 typedef struct launch {
-    pid_t pid;
-    char out[256], log[300];
-    int status;
-    double wall;
+    tp_proc p; /* the launcher, leading its own process group with both servers */
+    char out[256];
+    int status;  /* the launcher's exit code */
+    double wall; /* s, start to exit */
 } launch;
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 /* Starts ./run SCENE --out DIR [extra...] with the build under test. */
 static int start(launch *l, const char *scene, const char *tag, const char *const *extra)
 {
     snprintf(l->out, sizeof l->out, "/tmp/demfem-coupled-%d-%s", (int)getpid(), tag);
-    snprintf(l->log, sizeof l->log, "%s.log", l->out);
+    char log[300];
+    snprintf(log, sizeof log, "%s.log", l->out);
     mkdir(l->out, 0755);
     const char *argv[32] = {DEMFEM_SOURCE_DIR "/run", scene, "--out", l->out};
     int n = 4;
@@ -53,55 +45,25 @@ static int start(launch *l, const char *scene, const char *tag, const char *cons
     argv[n] = NULL;
     setenv("DEMFEM_NO_BUILD", "1", 1);
     setenv("DEMFEM_BUILD_DIR", DEMFEM_BUILD_DIR, 1);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, l->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    /* Its own process group, so that a test can signal the launcher alone. */
-    posix_spawnattr_t at;
-    posix_spawnattr_init(&at);
-    posix_spawnattr_setflags(&at, POSIX_SPAWN_SETPGROUP);
-    posix_spawnattr_setpgroup(&at, 0);
-    l->wall = now();
-    int rc = posix_spawn(&l->pid, argv[0], &fa, &at, (char *const *)argv, environ);
-    posix_spawn_file_actions_destroy(&fa);
-    posix_spawnattr_destroy(&at);
-    return rc;
+    /* Its own process group, so that a test can signal the launcher alone
+     * and a timeout kills the servers with it. */
+    return tp_spawn(&l->p, argv, log, TP_NEW_GROUP);
 }
 
 static int finish(launch *l, double timeout_s)
 {
-    double t0 = now();
-    for (;;) {
-        int st;
-        if (waitpid(l->pid, &st, WNOHANG) == l->pid) {
-            l->status = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-            l->wall = now() - l->wall;
-            return 0;
-        }
-        if (now() - t0 > timeout_s) {
-            kill(-l->pid, SIGKILL);
-            waitpid(l->pid, &st, 0);
-            return -1;
-        }
-        struct timespec ts = {0, 5000000};
-        nanosleep(&ts, NULL);
+    if (tp_wait(&l->p, timeout_s) != 0) {
+        tp_kill(&l->p);
+        return -1;
     }
+    l->status = l->p.status;
+    l->wall = l->p.t_exit - l->p.t_start;
+    return 0;
 }
 
-/* The whole log, NUL-terminated, in a static buffer. */
-static const char *log_text(const launch *l)
-{
-    static char buf[1 << 16];
-    FILE *f = fopen(l->log, "r");
-    size_t n = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-    if (f)
-        fclose(f);
-    buf[n] = '\0';
-    return buf;
-}
+static const char *log_text(const launch *l) { return tp_log_text(&l->p); }
 
-static void dump_log(const launch *l) { fprintf(stderr, "---- %s ----\n%s----\n", l->log, log_text(l)); }
+static void dump_log(const launch *l) { tp_print_log(&l->p); }
 
 /* The segment the launcher chose (its log names it) is gone from /dev/shm. */
 static int shm_clean(const launch *l)
@@ -189,14 +151,24 @@ static int plate_peer_killed(void)
     launch l;
     const char *extra[] = {"--fem", PLATE_PEER_PATH, NULL};
     ENSURE(start(&l, scene, "killed", extra) == 0);
-    /* Let it reach the exchange loop, then kill the FEM side. */
-    struct timespec ts = {1, 0};
-    nanosleep(&ts, NULL);
-    /* [r]: the pattern must not match the shell that runs pkill itself. */
-    ENSURE(system("pkill -KILL -f 'plate_pee[r] --scene /tmp/demfem-coupled-' ") == 0);
-    double t_kill = now();
+    /* Once the FEM side has done its first exchange it leaves its pid in
+     * the output folder (plate_peer.c): kill that process, not one found by
+     * name (with ctest -j another test's peer could match). */
+    char running[400];
+    snprintf(running, sizeof running, "%s/plate_peer.running", l.out);
+    if (tp_wait_file(running, 60, &l.p) != 0) {
+        finish(&l, 0);
+        dump_log(&l);
+        ENSURE_MSG(0, "the FEM side never reported its first exchange (%s)", running);
+    }
+    FILE *f = fopen(running, "r");
+    int victim = 0;
+    ENSURE(f && fscanf(f, "%d", &victim) == 1 && victim > 1);
+    fclose(f);
+    ENSURE(kill((pid_t)victim, SIGKILL) == 0);
+    double t_kill = tp_now();
     ENSURE(finish(&l, 20) == 0);
-    double reaction = now() - t_kill;
+    double reaction = tp_now() - t_kill;
     unlink(scene);
     if (l.status == 0)
         dump_log(&l);

@@ -319,6 +319,76 @@ static int drawbar_control(void)
     return 0;
 }
 
+/* The ramped-slip rig (wheel.slip_end): under slip control the realised
+ * slip is linear in the distance travelled, from wheel.slip to slip_end at
+ * travel_distance. A soil that needs a relaxation length L to build up its
+ * force, dF/dx = (K s - F) / L, read through the ramp lags its steady law
+ * F = K s by K L ds/dx once the start-up transient (~e^{-x/L}) has passed: the
+ * steady solution of that lag equation for a linear ramp, and the rule for
+ * how slow a ramp must be (K L ds/dx below the accuracy wanted). A scene
+ * that ramps without a travel length is refused. */
+static int slip_ramp_lag(void)
+{
+    drive_def d = control_def(DRIVE_CONTROL_SLIP);
+    d.slip = -0.1;
+    d.slip_end = 0.5;
+    d.slip_ramp = 1;
+    d.travel_distance = 0.3;
+    const double K = 1000.0, L = 0.01, g = (d.slip_end - d.slip) / d.travel_distance; /* ds/dx = 2 per m */
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-4;
+    drive_soil soil = {0.0, 0.0, 0.0};
+    double F = 0.0, worst_ramp = 0.0, worst_lag = 0.0, last_slip = 0.0;
+    long n = 0, steady = 0;
+    for (; n < 1000000; n++) {
+        double slip_held = drive_realised_slip(&d, &s), x0 = s.travelled;
+        ENSURE(drive_update(&d, &s, (n + 1) * dt, dt, &soil, &err) == CM_OK);
+        if (s.phase != DRIVE_TRAVEL)
+            break;
+        /* the soil over the interval just moved, at the slip held over it (exact for constant slip) */
+        double dx = s.travelled - x0;
+        F = K * slip_held + (F - K * slip_held) * exp(-dx / L);
+        soil.fx = F;
+        double slip = drive_realised_slip(&d, &s);
+        double ramp = d.slip + g * s.travelled;
+        worst_ramp = fmax(worst_ramp, fabs(slip - ramp));
+        /* the ramp's reading of the soil against the steady law, once the
+         * start-up transient (100 N at the first slip) has decayed: past 8 L */
+        if (s.travelled > 8 * L) {
+            worst_lag = fmax(worst_lag, fabs((K * slip - F) - K * L * g));
+            steady++;
+        }
+        last_slip = slip;
+    }
+    printf("  %ld intervals, %ld past 8 L: slip off the ramp by at most %.2e; lag K s - F off K L ds/dx = %.3f N "
+           "by at most %.3f N; last slip %.4f\n", n, steady, worst_ramp, K * L * g, worst_lag, last_slip);
+    ENSURE(s.phase == DRIVE_DONE && steady > 1000);
+    ENSURE(worst_ramp < 1e-12);
+    ENSURE_NEAR(last_slip, d.slip_end, 1e-3);
+    ENSURE(worst_lag < 0.02 * K * L * g);
+
+    /* the scene keys: a ramp needs a travel length */
+    cm_scene *sc;
+    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                                "slip = 0.0; slip_end = 0.4; travel_distance = 0.0; };",
+                                "ramp.cfg", &sc, &err) == CM_OK);
+    drive_def r = drive_def_default();
+    int rc = drive_config_read(sc, &r, &err);
+    cm_scene_close(&sc);
+    ENSURE_MSG(rc != CM_OK && strstr(err.msg, "wheel.slip_end"), "a ramp without travel accepted (%s)", err.msg);
+    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                                "slip = 0.0; slip_end = 0.4; travel_distance = 0.5; };",
+                                "ramp.cfg", &sc, &err) == CM_OK);
+    r = drive_def_default();
+    rc = drive_config_read(sc, &r, &err);
+    cm_scene_close(&sc);
+    ENSURE_MSG(rc == CM_OK && r.slip_ramp && r.slip_end == 0.4, "%s", err.msg);
+    ENSURE_NEAR(drive_prescribed_slip(&r, 0.25), 0.2, 1e-15);
+    return 0;
+}
+
 /* Slip control: the recorded (realised) slip is the prescribed one, driving
  * and braking, in both motions, throughout the travel. */
 static int slip_control_realises_slip(void)
@@ -510,6 +580,7 @@ static const test_case tests[] = {
     {"torque_settles_at_equilibrium", torque_settles_at_equilibrium},
     {"drawbar_control", drawbar_control},
     {"slip_control_realises_slip", slip_control_realises_slip},
+    {"slip_ramp_lag", slip_ramp_lag},
     {"damper_decays_heave", damper_decays_heave},
     {"damper_spares_steady_sinkage", damper_spares_steady_sinkage},
 };

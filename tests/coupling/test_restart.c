@@ -23,7 +23,6 @@
 #include <fcntl.h>
 #include <inttypes.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -36,6 +35,7 @@
 #include <hdf5.h>
 
 #include "ckpt.h"
+#include "proc.h"
 #include "test.h"
 
 extern char **environ;
@@ -53,19 +53,6 @@ extern char **environ;
 #endif
 
 static char g_dir[200], g_scene[300];
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void nap_ms(int ms)
-{
-    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-    nanosleep(&ts, NULL);
-}
 
 static int file_text(const char *path, char *buf, size_t cap)
 {
@@ -111,32 +98,19 @@ static int same_file(const char *a, const char *b)
 
 static pid_t spawn(const char *const *argv, const char *log)
 {
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    pid_t pid = -1;
-    if (posix_spawn(&pid, argv[0], &fa, NULL, (char *const *)argv, environ) != 0)
-        pid = -1;
-    posix_spawn_file_actions_destroy(&fa);
-    return pid;
+    tp_proc p;
+    return tp_spawn(&p, argv, log, 0) == 0 ? p.pid : -1;
 }
 
 /* Exit status as the shell reports it, -1 on timeout (the process is killed). */
 static int wait_exit(pid_t pid, double timeout_s)
 {
-    double t0 = now();
-    for (;;) {
-        int st;
-        if (waitpid(pid, &st, WNOHANG) == pid)
-            return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-        if (now() - t0 > timeout_s) {
-            kill(pid, SIGKILL);
-            waitpid(pid, &st, 0);
-            return -1;
-        }
-        nap_ms(2);
+    tp_proc p = {.pid = pid, .status = -1, .ready_fd = -1};
+    if (tp_wait(&p, timeout_s) != 0) {
+        tp_kill(&p);
+        return -1;
     }
+    return p.status;
 }
 
 typedef struct pair {
@@ -160,26 +134,18 @@ static int pair_start(pair *p, const char *out)
     return p->fem > 0 && p->dem > 0 ? 0 : -1;
 }
 
-/* The child has ended (it stays a zombie for wait_exit to collect). */
-static int exited(pid_t pid)
-{
-    siginfo_t si;
-    memset(&si, 0, sizeof si);
-    return waitid(P_PID, (id_t)pid, &si, WEXITED | WNOHANG | WNOWAIT) != 0 || si.si_pid == pid;
-}
-
 /* Waits until the run has written `rows` rows of traction.csv (or ended). */
 static int wait_rows(const pair *p, long rows, double timeout_s)
 {
     char csv[300];
     snprintf(csv, sizeof csv, "%s/traction.csv", p->out);
-    double t0 = now();
-    while (now() - t0 < timeout_s) {
+    double t0 = tp_now();
+    while (tp_now() - t0 < timeout_s) {
         if (csv_rows(csv) >= rows)
             return 0;
-        if (exited(p->fem) || exited(p->dem))
+        if (tp_pid_exited(p->fem) || tp_pid_exited(p->dem))
             return -1;
-        nap_ms(1);
+        tp_nap_ms(1);
     }
     return -1;
 }
@@ -454,10 +420,10 @@ static int sigkill_random_step_20_trials(void)
         ENSURE_MSG(wait_rows(&p, at, 60) == 0, "trial %d: the run did not reach exchange %ld", t, at);
         pid_t victim = kill_fem ? p.fem : p.dem, survivor = kill_fem ? p.dem : p.fem;
         kill(victim, SIGKILL);
-        double t_kill = now();
+        double t_kill = tp_now();
         ENSURE(wait_exit(victim, 10) == 128 + SIGKILL);
         int rc = wait_exit(survivor, 10);
-        double t_exit = now() - t_kill;
+        double t_exit = tp_now() - t_kill;
         worst_exit = t_exit > worst_exit ? t_exit : worst_exit;
         const char *slog = kill_fem ? p.dem_log : p.fem_log;
         static char text[1 << 18];

@@ -1127,8 +1127,11 @@ static int output_files(void)
     ENSURE_MSG(fem_create(&c, &m, &err) == CM_OK, "%s", err.msg);
     ENSURE(fem_solve_static(m, &err) == CM_OK);
     ENSURE_MSG(fem_write_snapshot(m, &err) == CM_OK, "%s", err.msg);
-    for (int k = 0; k < 4; k++)
+    for (int k = 0; k < 4; k++) {
         ENSURE_MSG(fem_advance(m, NULL, 2e-4, &err) == CM_OK, "%s", err.msg);
+        ENSURE_MSG(fem_output_due(m, &err) == CM_OK, "%s", err.msg); /* every 2nd: advances 2 and 4 */
+        ENSURE(fem_output_due(m, &err) == CM_OK);                    /* at most once per advance */
+    }
     fem_destroy(&m);
     char p[256];
     const char *names[] = {"fem.h5", "fem.xmf", "fem_series.csv"};

@@ -7,7 +7,12 @@
  * The DEM side sends forces f_j(seq) = value(seq, j); the FEM side checks
  * every value and answers positions f_j + 1 and velocities -f_j, which the
  * DEM side checks in turn. Any difference is a failure (exit 4). Exit codes:
- * 0 ok, 2 usage, 3 protocol/peer error, 4 wrong payload content. */
+ * 0 ok, 2 usage, 3 protocol/peer error, 4 wrong payload content.
+ *
+ * With --ready-fd FD it announces where it is on that descriptor (a pipe the
+ * test holds, tests/proc.h), one byte each: 'c' the FEM side has created the
+ * segment, 'a' the DEM side is about to attach, 'x' the first exchange is
+ * done (both sides). */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -18,6 +23,7 @@
 #include <unistd.h>
 
 #include "ipc.h"
+#include "proc.h"
 
 static volatile sig_atomic_t g_stop;
 
@@ -31,7 +37,7 @@ typedef struct options {
     const char *role, *shm;
     unsigned nodes, tris, exchanges, every, version, expect_nodes, slots;
     double dt, expect_dt, stall, connect, spin_us;
-    int checksum, delay_ms, quiet;
+    int checksum, delay_ms, quiet, ready_fd;
 } options;
 
 static double value(unsigned long long seq, size_t j)
@@ -44,7 +50,7 @@ static int usage(void)
     fprintf(stderr,
             "usage: ipc_peer --role fem|dem --shm /NAME [--nodes N] [--tris M] [--exchanges K] [--dt S] "
             "[--every K] [--expect-dt S] [--expect-nodes N] [--version V] [--checksum] [--slots S] "
-            "[--stall S] [--connect S] [--spin-us U] [--delay-ms D] [--quiet]\n");
+            "[--stall S] [--connect S] [--spin-us U] [--delay-ms D] [--ready-fd FD] [--quiet]\n");
     return 2;
 }
 
@@ -72,6 +78,7 @@ static int run_fem(const options *o)
     int rc = ipc_create(o->shm, &def, &ch, err, sizeof err);
     if (rc)
         return fail("fem", 3, err);
+    tp_announce(o->ready_fd, 'c');
     double *x = ipc_surface_nodes(ch);
     uint32_t *t = ipc_surface_tris(ch);
     for (size_t i = 0; i < o->nodes; i++) {
@@ -124,6 +131,8 @@ static int run_fem(const options *o)
         rc = ipc_send_commit(ch);
         if (rc || kind == IPC_FRAME_FINISH)
             break;
+        if (n == 0)
+            tp_announce(o->ready_fd, 'x');
     }
     if (rc) {
         fail("fem", 3, ipc_error(ch));
@@ -150,6 +159,7 @@ static int run_dem(const options *o)
     def.version = o->version;
     ipc_channel *ch;
     char err[512];
+    tp_announce(o->ready_fd, 'a');
     int rc = ipc_attach(o->shm, &def, &ch, err, sizeof err);
     if (rc)
         return fail("dem", 3, err);
@@ -192,6 +202,8 @@ static int run_dem(const options *o)
             ipc_close(&ch, IPC_ERR_PROTOCOL);
             return fail("dem", 4, m);
         }
+        if (n == 0)
+            tp_announce(o->ready_fd, 'x');
     }
     if (rc) {
         fail("dem", 3, ipc_error(ch));
@@ -208,7 +220,7 @@ static int run_dem(const options *o)
 int main(int argc, char **argv)
 {
     options o = {.nodes = 1000, .exchanges = 100, .every = 1, .dt = 1e-5, .stall = 1.0, .connect = 10.0,
-                 .spin_us = 50.0, .slots = 2};
+                 .spin_us = 50.0, .slots = 2, .ready_fd = -1};
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -228,6 +240,7 @@ int main(int argc, char **argv)
         else if (OPT("--connect")) o.connect = strtod(v, NULL);
         else if (OPT("--spin-us")) o.spin_us = strtod(v, NULL);
         else if (OPT("--delay-ms")) o.delay_ms = atoi(v);
+        else if (OPT("--ready-fd")) o.ready_fd = atoi(v);
         else if (strcmp(a, "--checksum") == 0) o.checksum = 1;
         else if (strcmp(a, "--quiet") == 0) o.quiet = 1;
         else return usage();
@@ -242,6 +255,7 @@ int main(int argc, char **argv)
     sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
+    signal(SIGPIPE, SIG_IGN); /* a test that stopped listening on the readiness pipe must not kill us */
     if (o.delay_ms > 0) {
         struct timespec ts = {o.delay_ms / 1000, (long)(o.delay_ms % 1000) * 1000000L};
         nanosleep(&ts, NULL);

@@ -1,10 +1,11 @@
 /* Protocol integration tests: two real processes (ipc_peer) on a real POSIX
  * shared-memory segment. Each test checks exit codes, what the survivor says
- * and how fast, and that nothing is left in /dev/shm. */
+ * and how fast, and that nothing is left in /dev/shm. The peers announce
+ * their progress on a readiness pipe (tests/proc.h): no case waits by
+ * sleeping or by polling for a short-lived state. */
 #include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -17,33 +18,12 @@
 
 #include "ipc.h"
 #include "segment.h"
+#include "proc.h"
 #include "test.h"
-
-extern char **environ;
 
 #ifndef IPC_PEER_PATH
 #error "IPC_PEER_PATH must point at the ipc_peer executable"
 #endif
-
-typedef struct peer {
-    pid_t pid;
-    char log[256]; /* stderr + stdout of the process */
-    int status;    /* exit status once reaped */
-    double t_exit; /* when it was reaped */
-} peer;
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
-static void sleep_ms(int ms)
-{
-    struct timespec ts = {ms / 1000, (long)(ms % 1000) * 1000000L};
-    nanosleep(&ts, NULL);
-}
 
 static void unique_name(char *buf, size_t len, const char *what)
 {
@@ -51,8 +31,9 @@ static void unique_name(char *buf, size_t len, const char *what)
     snprintf(buf, len, "/demfem-test-%d-%s-%d", (int)getpid(), what, counter++);
 }
 
-/* Starts ipc_peer with the given NULL-terminated extra arguments. */
-static int spawn_peer(peer *p, const char *role, const char *shm, const char *const *args)
+/* Starts ipc_peer with the given NULL-terminated extra arguments; with
+ * TP_READY it announces its progress on the readiness pipe (ipc_peer.c). */
+static int spawn_peer(tp_proc *p, const char *role, const char *shm, const char *const *args, int flags)
 {
     const char *argv[40];
     int n = 0;
@@ -61,70 +42,16 @@ static int spawn_peer(peer *p, const char *role, const char *shm, const char *co
     argv[n++] = role;
     argv[n++] = "--shm";
     argv[n++] = shm;
+    if (flags & TP_READY) {
+        argv[n++] = "--ready-fd";
+        argv[n++] = TP_READY_FD_TEXT;
+    }
     for (int i = 0; args && args[i] && n < 38; i++)
         argv[n++] = args[i];
     argv[n] = NULL;
-    snprintf(p->log, sizeof p->log, "/tmp/demfem-test-%d-%s-%s.log", (int)getpid(), role, shm + 1);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, p->log, O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    int rc = posix_spawn(&p->pid, IPC_PEER_PATH, &fa, NULL, (char *const *)argv, environ);
-    posix_spawn_file_actions_destroy(&fa);
-    p->status = -1;
-    return rc;
-}
-
-/* Waits up to timeout_s for the peer to exit; returns 0 when it did. */
-static int reap(peer *p, double timeout_s)
-{
-    double t0 = now();
-    for (;;) {
-        int st;
-        pid_t r = waitpid(p->pid, &st, WNOHANG);
-        if (r == p->pid) {
-            p->status = st;
-            p->t_exit = now();
-            return 0;
-        }
-        if (now() - t0 > timeout_s)
-            return -1;
-        sleep_ms(2);
-    }
-}
-
-static void kill_and_reap(peer *p)
-{
-    if (p->status == -1) {
-        kill(p->pid, SIGKILL);
-        reap(p, 5.0);
-    }
-}
-
-static int exit_code(const peer *p) { return WIFEXITED(p->status) ? WEXITSTATUS(p->status) : 128 + WTERMSIG(p->status); }
-
-/* Whether the peer's log contains needle (case-sensitive). */
-static int log_has(const peer *p, const char *needle)
-{
-    FILE *f = fopen(p->log, "r");
-    if (!f)
-        return 0;
-    char buf[8192];
-    size_t n = fread(buf, 1, sizeof buf - 1, f);
-    fclose(f);
-    buf[n] = '\0';
-    return strstr(buf, needle) != NULL;
-}
-
-static void print_log(const peer *p)
-{
-    FILE *f = fopen(p->log, "r");
-    if (!f)
-        return;
-    char line[1024];
-    while (fgets(line, sizeof line, f))
-        fprintf(stderr, "    | %s", line);
-    fclose(f);
+    char log[256];
+    snprintf(log, sizeof log, "/tmp/demfem-test-%d-%s-%s.log", (int)getpid(), role, shm + 1);
+    return tp_spawn(p, argv, log, flags);
 }
 
 static int shm_exists(const char *name)
@@ -134,34 +61,22 @@ static int shm_exists(const char *name)
     return access(path, F_OK) == 0;
 }
 
-/* Waits until the segment appears (the FEM peer created it). */
-static int wait_shm(const char *name, double timeout_s)
-{
-    double t0 = now();
-    while (!shm_exists(name)) {
-        if (now() - t0 > timeout_s)
-            return -1;
-        sleep_ms(1);
-    }
-    return 0;
-}
-
 #define ENSURE_EXIT(p, code)                                                                 \
     do {                                                                                     \
-        if (exit_code(p) != (code)) {                                                        \
+        if ((p)->status != (code)) {                                                         \
             fprintf(stderr, "%s:%d: %s exited %d, expected %d; its log:\n", __FILE__, __LINE__, \
-                    #p, exit_code(p), (code));                                               \
-            print_log(p);                                                                    \
+                    #p, (p)->status, (code));                                                \
+            tp_print_log(p);                                                                 \
             return 1;                                                                        \
         }                                                                                    \
     } while (0)
 
 #define ENSURE_LOG(p, needle)                                                                \
     do {                                                                                     \
-        if (!log_has(p, needle)) {                                                           \
+        if (!tp_log_has(p, needle)) {                                                        \
             fprintf(stderr, "%s:%d: %s's log lacks \"%s\"; its log:\n", __FILE__, __LINE__, #p,  \
                     needle);                                                                 \
-            print_log(p);                                                                    \
+            tp_print_log(p);                                                                 \
             return 1;                                                                        \
         }                                                                                    \
     } while (0)
@@ -174,16 +89,16 @@ static int roundtrip_10000(void)
 {
     char shm[128];
     unique_name(shm, sizeof shm, "rt");
-    peer fem, dem;
+    tp_proc fem, dem;
     const char *fa[] = {"--nodes", "20000", "--checksum", "--expect-dt", "1e-05", NULL};
     const char *da[] = {"--exchanges", "10000", "--dt", "1e-05", NULL};
-    double t0 = now();
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    int ok = reap(&dem, 300) == 0 && reap(&fem, 10) == 0;
-    double wall = now() - t0;
-    kill_and_reap(&dem);
-    kill_and_reap(&fem);
+    double t0 = tp_now();
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, 0) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da, 0) == 0);
+    int ok = tp_wait(&dem, 300) == 0 && tp_wait(&fem, 10) == 0;
+    double wall = tp_now() - t0;
+    tp_kill(&dem);
+    tp_kill(&fem);
     ENSURE(ok);
     ENSURE_EXIT(&dem, 0);
     ENSURE_EXIT(&fem, 0);
@@ -199,15 +114,20 @@ static int dem_starts_first(void)
 {
     char shm[128];
     unique_name(shm, sizeof shm, "demfirst");
-    peer fem, dem;
+    tp_proc fem, dem;
     const char *da[] = {"--exchanges", "2000", NULL};
     const char *fa[] = {"--nodes", "500", "--checksum", NULL};
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    sleep_ms(300); /* the DEM waits for the segment */
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    int ok = reap(&dem, 60) == 0 && reap(&fem, 10) == 0;
-    kill_and_reap(&dem);
-    kill_and_reap(&fem);
+    /* The FEM side starts only once the DEM side is about to attach: the DEM
+     * must wait for a segment that does not exist yet. */
+    ENSURE(spawn_peer(&dem, "dem", shm, da, TP_READY) == 0);
+    if (tp_wait_ready(&dem, 'a', 30) != 0) {
+        tp_kill(&dem);
+        ENSURE_MSG(0, "the DEM peer did not start");
+    }
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, 0) == 0);
+    int ok = tp_wait(&dem, 60) == 0 && tp_wait(&fem, 10) == 0;
+    tp_kill(&dem);
+    tp_kill(&fem);
     ENSURE(ok);
     ENSURE_EXIT(&dem, 0);
     ENSURE_EXIT(&fem, 0);
@@ -220,14 +140,14 @@ static int ring_of_four_slots(void)
 {
     char shm[128];
     unique_name(shm, sizeof shm, "slots");
-    peer fem, dem;
+    tp_proc fem, dem;
     const char *fa[] = {"--nodes", "300", "--slots", "4", "--expect-dt", "5e-05", NULL};
     const char *da[] = {"--exchanges", "3000", "--dt", "1e-05", "--every", "5", NULL};
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    int ok = reap(&dem, 60) == 0 && reap(&fem, 10) == 0;
-    kill_and_reap(&dem);
-    kill_and_reap(&fem);
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, 0) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da, 0) == 0);
+    int ok = tp_wait(&dem, 60) == 0 && tp_wait(&fem, 10) == 0;
+    tp_kill(&dem);
+    tp_kill(&fem);
     ENSURE(ok);
     ENSURE_EXIT(&dem, 0);
     ENSURE_EXIT(&fem, 0);
@@ -242,34 +162,37 @@ static int peer_lost(const char *victim_role, int sig, const char *survivor_says
 {
     char shm[128];
     unique_name(shm, sizeof shm, victim_role);
-    peer fem, dem;
+    tp_proc fem, dem;
     const char *fa[] = {"--nodes", "2000", NULL};
     const char *da[] = {"--exchanges", "100000000", NULL};
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    /* Running once the name is unlinked after the handshake. */
-    int up = wait_shm(shm, 5.0) == 0;
-    double t0 = now();
-    while (up && shm_exists(shm) && now() - t0 < 5.0)
-        sleep_ms(1);
-    sleep_ms(200);
-    peer *victim = strcmp(victim_role, "fem") == 0 ? &fem : &dem;
-    peer *survivor = victim == &fem ? &dem : &fem;
-    double t_kill = now();
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, TP_READY) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da, TP_READY) == 0);
+    /* Running once both have announced their first exchange (a byte on a
+     * pipe: it cannot be missed, however fast or slow the handshake). */
+    int up = tp_wait_ready(&fem, 'x', 30) == 0 && tp_wait_ready(&dem, 'x', 30) == 0;
+    tp_proc *victim = strcmp(victim_role, "fem") == 0 ? &fem : &dem;
+    tp_proc *survivor = victim == &fem ? &dem : &fem;
+    if (!up) {
+        tp_kill(&fem);
+        tp_kill(&dem);
+        tp_print_log(&fem);
+        tp_print_log(&dem);
+        ENSURE_MSG(0, "the pair did not start exchanging within 30 s");
+    }
+    double t_kill = tp_now();
     kill(victim->pid, sig);
-    int survived = reap(survivor, 5.0) == 0;
+    int survived = tp_wait(survivor, 5.0) == 0;
     double dt = survived ? survivor->t_exit - t_kill : 99;
     if (sig == SIGSTOP)
         kill(victim->pid, SIGKILL);
-    reap(victim, 5.0);
-    kill_and_reap(&fem);
-    kill_and_reap(&dem);
-    ENSURE(up);
+    tp_wait(victim, 5.0);
+    tp_kill(&fem);
+    tp_kill(&dem);
     ENSURE_MSG(survived && dt < 2.0, "survivor took %.2f s to exit", dt);
-    ENSURE_MSG(exit_code(survivor) != 0, "survivor exited 0");
+    ENSURE_MSG(survivor->status != 0, "survivor exited 0");
     ENSURE_LOG(survivor, survivor_says);
     ENSURE(!shm_exists(shm));
-    printf("  %s got signal %d: survivor exited %d after %.3f s\n", victim_role, sig, exit_code(survivor), dt);
+    printf("  %s got signal %d: survivor exited %d after %.3f s\n", victim_role, sig, survivor->status, dt);
     return 0;
 }
 
@@ -286,22 +209,21 @@ static int stale_segment_refused(void)
 {
     char shm[128];
     unique_name(shm, sizeof shm, "stale");
-    peer fem, fem2, dem;
+    tp_proc fem, fem2, dem;
     const char *fa[] = {"--nodes", "100", "--connect", "30", NULL};
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    ENSURE(wait_shm(shm, 5.0) == 0);
-    sleep_ms(100);
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, TP_READY) == 0);
+    ENSURE(tp_wait_ready(&fem, 'c', 30) == 0); /* the segment is created and its header written */
     kill(fem.pid, SIGKILL);
-    reap(&fem, 5.0);
+    tp_wait(&fem, 5.0);
     ENSURE(shm_exists(shm));
 
     const char *fa2[] = {"--nodes", "100", NULL};
-    ENSURE(spawn_peer(&fem2, "fem", shm, fa2) == 0);
+    ENSURE(spawn_peer(&fem2, "fem", shm, fa2, 0) == 0);
     const char *da[] = {"--connect", "5", NULL};
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    int ok = reap(&fem2, 5.0) == 0 && reap(&dem, 5.0) == 0;
-    kill_and_reap(&fem2);
-    kill_and_reap(&dem);
+    ENSURE(spawn_peer(&dem, "dem", shm, da, 0) == 0);
+    int ok = tp_wait(&fem2, 5.0) == 0 && tp_wait(&dem, 5.0) == 0;
+    tp_kill(&fem2);
+    tp_kill(&dem);
     shm_unlink(shm);
     ENSURE(ok);
     ENSURE_EXIT(&fem2, 3);
@@ -317,12 +239,12 @@ static int refused_both_sides(const char *tag, const char *const *fa, const char
 {
     char shm[128];
     unique_name(shm, sizeof shm, tag);
-    peer fem, dem;
-    ENSURE(spawn_peer(&fem, "fem", shm, fa) == 0);
-    ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
-    int ok = reap(&dem, 10) == 0 && reap(&fem, 10) == 0;
-    kill_and_reap(&dem);
-    kill_and_reap(&fem);
+    tp_proc fem, dem;
+    ENSURE(spawn_peer(&fem, "fem", shm, fa, 0) == 0);
+    ENSURE(spawn_peer(&dem, "dem", shm, da, 0) == 0);
+    int ok = tp_wait(&dem, 10) == 0 && tp_wait(&fem, 10) == 0;
+    tp_kill(&dem);
+    tp_kill(&fem);
     ENSURE(ok);
     ENSURE_EXIT(&dem, 3);
     ENSURE_EXIT(&fem, 3);
@@ -402,12 +324,12 @@ static int corrupted_header_refused(void)
         case C_NEG_MASS: ipc_surface_masses(ch)[33] = -1.0; break;
         }
         munmap(h, IPC_PAGE);
-        peer dem;
+        tp_proc dem;
         const char *da[] = {"--connect", "5", NULL};
-        ENSURE(spawn_peer(&dem, "dem", shm, da) == 0);
+        ENSURE(spawn_peer(&dem, "dem", shm, da, 0) == 0);
         int rc = ipc_accept(ch); /* the DEM refuses: we must hear about it, not hang */
-        int ok = reap(&dem, 10) == 0;
-        kill_and_reap(&dem);
+        int ok = tp_wait(&dem, 10) == 0;
+        tp_kill(&dem);
         ipc_close(&ch, rc);
         ENSURE(ok);
         ENSURE_MSG(rc != IPC_OK, "corruption %d accepted", c);
@@ -429,9 +351,14 @@ static int out_of_order_frame_refused(void)
      * thread, and a child forked from a threaded parent can inherit an
      * allocator lock held by that thread (it hung under AddressSanitizer).
      * The child's attach waits for the segment. */
+    int corrupted[2], done[2]; /* child -> parent: frame 1 is corrupted; parent -> child: it was read */
+    ENSURE(pipe(corrupted) == 0 && pipe(done) == 0);
     pid_t child = fork();
     if (child == 0) {
         /* DEM side in a child process: send frame 0, then a frame claiming seq 5. */
+        close(corrupted[0]);
+        close(done[1]);
+        alarm(120); /* never outlive a lost parent */
         ipc_attach_def ad = ipc_default_attach_def();
         ad.dt = 1e-5;
         ipc_channel *dem;
@@ -453,10 +380,17 @@ static int out_of_order_frame_refused(void)
                 ipc_recv_release(dem);
             }
         }
-        sleep_ms(500);
+        tp_announce(corrupted[1], 'k');
+        /* Stay attached until the parent has read the frame: closing first
+         * would let it see a finished peer instead of the bad frame. */
+        char c;
+        while (read(done[0], &c, 1) < 0 && errno == EINTR)
+            ;
         ipc_close(&dem, IPC_OK);
         _exit(0);
     }
+    close(corrupted[1]);
+    close(done[0]);
     ENSURE(child > 0);
     ipc_create_def def = ipc_default_create_def();
     def.n_nodes = 10;
@@ -482,9 +416,16 @@ static int out_of_order_frame_refused(void)
     double *p;
     ENSURE(ipc_send_begin(fem, &oh, &p) == IPC_OK);
     ENSURE(ipc_send_commit(fem) == IPC_OK);
-    /* The race between commit and the corruption is closed by waiting a bit. */
-    sleep_ms(100);
+    /* Read frame 1 only once the child says it has corrupted it. */
+    char c = 0;
+    ssize_t got;
+    while ((got = read(corrupted[0], &c, 1)) < 0 && errno == EINTR)
+        ;
+    ENSURE_MSG(got == 1 && c == 'k', "the DEM child ended before corrupting its frame");
     rc = ipc_recv(fem, &h, &f);
+    tp_announce(done[1], 'd');
+    close(done[1]);
+    close(corrupted[0]);
     int st;
     waitpid(child, &st, 0);
     ENSURE(rc == IPC_ERR_PROTOCOL);

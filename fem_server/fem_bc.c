@@ -1,0 +1,178 @@
+/* Supports and dead loads by named set (issue 16 item 0b): the scene keys
+ * fem.supports and fem.loads (fem_config.c), applied by fem_create. */
+#include "fem_bc.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+const char *const fem_set_names[FEM_SET_COUNT + 1] = {"rim",  "cavity", "contact", "xmin", "xmax", "ymin",
+                                                      "ymax", "zmin",   "zmax",    NULL};
+
+/* Bounding-box planes: a node lies on one within 1e-9 of the box's diagonal. */
+typedef struct planes {
+    double lo[3], hi[3], tol;
+} planes;
+
+static planes box_planes(const fem_mesh *m)
+{
+    planes p;
+    for (int a = 0; a < 3; a++)
+        p.lo[a] = INFINITY, p.hi[a] = -INFINITY;
+    for (int n = 0; n < m->n_nodes; n++)
+        for (int a = 0; a < 3; a++) {
+            p.lo[a] = fmin(p.lo[a], m->x[3 * n + a]);
+            p.hi[a] = fmax(p.hi[a], m->x[3 * n + a]);
+        }
+    double d = 0;
+    for (int a = 0; a < 3; a++)
+        d += (p.hi[a] - p.lo[a]) * (p.hi[a] - p.lo[a]);
+    p.tol = 1e-9 * sqrt(d);
+    return p;
+}
+
+static bool node_on_plane(const fem_mesh *m, const planes *p, fem_set set, int n)
+{
+    int k = set - FEM_SET_XMIN, a = k / 2;
+    double target = k % 2 ? p->hi[a] : p->lo[a];
+    return fabs(m->x[3 * n + a] - target) <= p->tol;
+}
+
+static bool face_in(const fem_mesh *m, const planes *p, fem_set set, int f)
+{
+    switch (set) {
+    case FEM_SET_RIM: return m->face_tag[f] & FEM_FACE_RIM;
+    case FEM_SET_CAVITY: return m->face_tag[f] & FEM_FACE_CAVITY;
+    case FEM_SET_CONTACT: return m->face_tag[f] & FEM_FACE_CONTACT;
+    default:
+        for (int q = 0; q < 3; q++)
+            if (!node_on_plane(m, p, set, m->faces[3 * f + q]))
+                return false;
+        return true;
+    }
+}
+
+/* Marks in[n] for the nodes of a set: rim's tagged nodes, the nodes of a
+ * face set's faces, the nodes on a plane. Returns their count. */
+static int set_nodes(const fem_mesh *m, const planes *p, fem_set set, uint8_t *in)
+{
+    memset(in, 0, (size_t)m->n_nodes);
+    if (set == FEM_SET_RIM) {
+        for (int n = 0; n < m->n_nodes; n++)
+            in[n] = (m->node_tag[n] & FEM_NODE_RIM) != 0;
+    } else if (set >= FEM_SET_XMIN) {
+        for (int n = 0; n < m->n_nodes; n++)
+            in[n] = node_on_plane(m, p, set, n);
+    } else {
+        for (int f = 0; f < m->n_faces; f++)
+            if (face_in(m, p, set, f))
+                for (int q = 0; q < 3; q++)
+                    in[m->faces[3 * f + q]] = 1;
+    }
+    int count = 0;
+    for (int n = 0; n < m->n_nodes; n++)
+        count += in[n];
+    return count;
+}
+
+int fem_bc_constrain(fem_solver *s, const fem_mesh *m, const fem_config *cfg, cm_error *err)
+{
+    if (cfg->n_supports == 0)
+        return fem_solver_constrain_rim(s, m, err);
+    planes p = box_planes(m);
+    uint8_t *in = malloc((size_t)m->n_nodes);
+    double *values = calloc((size_t)s->n_dof, sizeof *values);
+    if (!in || !values) {
+        free(in);
+        free(values);
+        return cm_fail(err, CM_ERR_NOMEM, "fem: out of memory");
+    }
+    memset(s->fixed, 0, (size_t)s->n_dof);
+    int rc = CM_OK;
+    for (int k = 0; k < cfg->n_supports && !rc; k++) {
+        const fem_support *sp = &cfg->supports[k];
+        if (set_nodes(m, &p, sp->set, in) == 0)
+            rc = cm_fail(err, CM_ERR_RANGE, "%s: fem.supports.[%d]: the set %s has no nodes", m->source, k,
+                         fem_set_names[sp->set]);
+        for (int n = 0; n < m->n_nodes && !rc; n++)
+            for (int a = 0; a < 3; a++)
+                if (in[n] && sp->fix[a]) {
+                    s->fixed[3 * n + a] = 1;
+                    values[3 * n + a] = sp->value[a]; /* a later support on the same dof wins */
+                }
+    }
+    if (!rc)
+        rc = fem_solver_constrain(s, s->fixed, values, err);
+    free(in);
+    free(values);
+    return rc;
+}
+
+int fem_bc_loads(const fem_mesh *m, const fem_config *cfg, double *f, cm_error *err)
+{
+    if (cfg->n_loads == 0)
+        return CM_OK;
+    planes p = box_planes(m);
+    uint8_t *in = malloc((size_t)m->n_nodes);
+    if (!in)
+        return cm_fail(err, CM_ERR_NOMEM, "fem: out of memory");
+    int rc = CM_OK;
+    for (int k = 0; k < cfg->n_loads && !rc; k++) {
+        const fem_load *ld = &cfg->loads[k];
+        /* The set's faces and their area. */
+        double area = 0;
+        int faces = 0;
+        for (int fc = 0; fc < m->n_faces; fc++) {
+            if (!face_in(m, &p, ld->set, fc))
+                continue;
+            const int32_t *t = &m->faces[3 * fc];
+            const double *a = &m->x[3 * t[0]], *b = &m->x[3 * t[1]], *c = &m->x[3 * t[2]];
+            double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+            double an[3] = {0.5 * (e1[1] * e2[2] - e1[2] * e2[1]), 0.5 * (e1[2] * e2[0] - e1[0] * e2[2]),
+                            0.5 * (e1[0] * e2[1] - e1[1] * e2[0])}; /* A n, outward */
+            area += sqrt(an[0] * an[0] + an[1] * an[1] + an[2] * an[2]);
+            faces++;
+            /* consistent load of a constant traction on a linear triangle: A t / 3 per node */
+            double tr[3];
+            for (int d = 0; d < 3; d++)
+                tr[d] = ld->type == FEM_LOAD_PRESSURE ? -ld->value[0] * an[d]
+                                                      : ld->value[d] * sqrt(an[0] * an[0] + an[1] * an[1] + an[2] * an[2]);
+            if (ld->type == FEM_LOAD_FORCE)
+                continue; /* scaled once the area is known, below */
+            for (int q = 0; q < 3; q++)
+                for (int d = 0; d < 3; d++)
+                    f[3 * t[q] + d] += tr[d] / 3.0;
+        }
+        if (ld->type != FEM_LOAD_FORCE)
+            rc = faces ? CM_OK
+                       : cm_fail(err, CM_ERR_RANGE, "%s: fem.loads.[%d]: the set %s has no boundary faces to carry a %s",
+                                 m->source, k, fem_set_names[ld->set],
+                                 ld->type == FEM_LOAD_PRESSURE ? "pressure" : "traction");
+        else if (faces > 0) { /* a total force: the uniform traction F / A over the faces */
+            for (int fc = 0; fc < m->n_faces; fc++) {
+                if (!face_in(m, &p, ld->set, fc))
+                    continue;
+                const int32_t *t = &m->faces[3 * fc];
+                const double *a = &m->x[3 * t[0]], *b = &m->x[3 * t[1]], *c = &m->x[3 * t[2]];
+                double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+                double an[3] = {0.5 * (e1[1] * e2[2] - e1[2] * e2[1]), 0.5 * (e1[2] * e2[0] - e1[0] * e2[2]),
+                                0.5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+                double A = sqrt(an[0] * an[0] + an[1] * an[1] + an[2] * an[2]);
+                for (int q = 0; q < 3; q++)
+                    for (int d = 0; d < 3; d++)
+                        f[3 * t[q] + d] += ld->value[d] * A / area / 3.0;
+            }
+        } else { /* a node set without faces (rim nodes): equal shares */
+            int n_in = set_nodes(m, &p, ld->set, in);
+            if (n_in == 0)
+                rc = cm_fail(err, CM_ERR_RANGE, "%s: fem.loads.[%d]: the set %s has no nodes", m->source, k,
+                             fem_set_names[ld->set]);
+            for (int n = 0; n < m->n_nodes && !rc; n++)
+                if (in[n])
+                    for (int d = 0; d < 3; d++)
+                        f[3 * n + d] += ld->value[d] / n_in;
+        }
+    }
+    free(in);
+    return rc;
+}

@@ -1,0 +1,190 @@
+/* fem_server's exchange guards (fem_exchange.c), issue 16 item 0: the
+ * interface-work guard compares the two sides' work relative to the work
+ * itself, with a floor from the interface's energy scale.
+ *
+ * work_guard_relative: the guard's rule on numbers (no processes).
+ * tire_drift_stopped: tire_small with an exchange interval 12x too long
+ *   (coupling.dt 1.2e-4 s; fem.dt 2e-5 s sub-cycled) ran to the end with exit
+ *   0 before, the two sides' interface work 66 % apart (-1.34 J DEM, -0.46 J
+ *   FEM: never above the old absolute 1 J gap); it must stop, naming the
+ *   cause and the key to change.
+ * tire_moderate_interval_passes: the same at coupling.dt 5e-5 s, where the
+ *   two sides agree within 0.13 %: the guard must not fire.
+ * peer_nan_force_named: fem_server against this test acting as the DEM side,
+ *   which sends one frame with a NaN nodal force: fem_server must stop with
+ *   the peer's bad data named (exchange, node, component), not report an
+ *   unstable tire.
+ * The runs go through the launcher and wait for it with system() or
+ * waitpid(): no polling, no sleeps. */
+#include <math.h>
+#include <fcntl.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "fem_exchange.h"
+#include "test.h"
+
+#if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR)
+#error "DEMFEM_SOURCE_DIR and DEMFEM_BUILD_DIR must be defined"
+#endif
+
+static int work_guard_relative(void)
+{
+    cm_error err = {0};
+    /* Stable: a few per cent apart, whatever the size of the work. */
+    ENSURE(fem_check_interface_work(-0.385645, -0.385638, 0.09, 0.2, 1e-5, &err) == CM_OK);
+    ENSURE(fem_check_interface_work(-3.7e-6, -3.8e-6, 0.0, 0.05, 1e-5, &err) == CM_OK);
+    ENSURE(fem_check_interface_work(120.0, 110.0, 0.0, 1.0, 1e-5, &err) == CM_OK);
+    /* The small unstable case: 66 % apart, far below the old 1 J. */
+    ENSURE(fem_check_interface_work(-0.458, -1.337, 0.17, 0.21, 1.2e-4, &err) == CM_ERR_NUMERIC);
+    ENSURE_MSG(strstr(err.msg, "coupling unstable at t = 0.2100 s") && strstr(err.msg, "reduce coupling.dt") &&
+                   strstr(err.msg, "= 0.00012 s"),
+               "%s", err.msg);
+    /* The same relative gap on tiny works, just above the tolerance. */
+    ENSURE(fem_check_interface_work(1e-6, 1.5e-6, 0.0, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    /* Work passing through zero: the floor (the energy scale) holds it... */
+    ENSURE(fem_check_interface_work(1e-4, -1e-4, 0.08, 0.1, 1e-5, &err) == CM_OK);
+    /* ...but not a gap that is large against the floor too. */
+    ENSURE(fem_check_interface_work(0.03, -0.03, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    /* NaN never passes. */
+    ENSURE(fem_check_interface_work(NAN, 0.1, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    return 0;
+}
+
+/* Runs tire_small through the launcher with extra --set arguments; returns
+ * the launcher's exit status (-1: could not run) and leaves the log in log. */
+static int run_tire_small(const char *tag, const char *sets, char *log, size_t len)
+{
+    char out[256], cmd[2048];
+    snprintf(out, sizeof out, "/tmp/demfem-femguards-%d-%s", (int)getpid(), tag);
+    snprintf(log, len, "%s.log", out);
+    snprintf(cmd, sizeof cmd,
+             "DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR='%s' '%s/run' '%s/tests/coupling/scenes/tire_small.cfg' --out '%s' "
+             "%s > '%s' 2>&1",
+             DEMFEM_BUILD_DIR, DEMFEM_SOURCE_DIR, DEMFEM_SOURCE_DIR, out, sets, log);
+    int st = system(cmd);
+    char rm[400];
+    snprintf(rm, sizeof rm, "rm -rf '%s'", out);
+    if (system(rm) != 0)
+        fprintf(stderr, "could not remove %s\n", out);
+    return st == -1 || !WIFEXITED(st) ? -1 : WEXITSTATUS(st);
+}
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return NULL;
+    static char buf[1 << 17];
+    size_t n = fread(buf, 1, sizeof buf - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    return buf;
+}
+
+static int tire_drift_stopped(void)
+{
+    char log[300];
+    int status = run_tire_small("drift", "--set coupling.dt=1.2e-4 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
+                                log, sizeof log);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (status == 0 || !strstr(text, "coupling unstable"))
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(status != 0 && status != -1);
+    ENSURE(strstr(text, "[fem] error: coupling unstable at t = "));
+    ENSURE(strstr(text, "interface work seen by the FEM") && strstr(text, "reduce coupling.dt"));
+    ENSURE(strstr(text, "[dem] error: peer fem failed"));
+    ENSURE(!strstr(text, "traction over the steady part")); /* stopped, not finished */
+    unlink(log);
+    return 0;
+}
+
+static int tire_moderate_interval_passes(void)
+{
+    char log[300];
+    int status = run_tire_small("moderate", "--set coupling.dt=5e-5 --set dem.allow_unstable_dt=true --set fem.dt=2e-5",
+                                log, sizeof log);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (status != 0)
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(status == 0);
+    ENSURE(!strstr(text, "coupling unstable"));
+    ENSURE(strstr(text, "traction over the steady part"));
+    unlink(log);
+    return 0;
+}
+
+extern char **environ;
+
+static int peer_nan_force_named(void)
+{
+    char name[64], out[256], log[300];
+    snprintf(name, sizeof name, "/demfem-femguards-%d-nan", (int)getpid());
+    snprintf(out, sizeof out, "/tmp/demfem-femguards-%d-nan", (int)getpid());
+    snprintf(log, sizeof log, "%s.log", out);
+    mkdir(out, 0755);
+    const char *argv[] = {DEMFEM_BUILD_DIR "/fem_server/fem_server", "--scene",
+                          DEMFEM_SOURCE_DIR "/tests/coupling/scenes/tire_small.cfg", "--shm", name, "--out", out, NULL};
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    pid_t pid;
+    ENSURE(posix_spawn(&pid, argv[0], &fa, NULL, (char *const *)argv, environ) == 0);
+    posix_spawn_file_actions_destroy(&fa);
+    /* The DEM side: attach (the library waits for the segment), one frame. */
+    ipc_attach_def def = ipc_default_attach_def();
+    def.dt = 1e-5;
+    def.exchange_every = 1;
+    def.connect_timeout = 120;
+    ipc_channel *ch = NULL;
+    char err[512];
+    int rc = ipc_attach(name, &def, &ch, err, sizeof err);
+    if (rc != IPC_OK)
+        fprintf(stderr, "attach: %s\n", err);
+    ENSURE(rc == IPC_OK);
+    ipc_frame_head *fr;
+    double *p;
+    ENSURE(ipc_send_begin(ch, &fr, &p) == IPC_OK);
+    uint32_t nn = ipc_surface_node_count(ch);
+    ENSURE(nn > 7);
+    memset(p, 0, ipc_send_len(ch) * sizeof *p);
+    fr->kind = IPC_FRAME_DATA;
+    fr->time = 0.0;
+    p[3 * 7 + 2] = NAN; /* node 7, z */
+    ENSURE(ipc_send_commit(ch) == IPC_OK);
+    const ipc_frame_head *in;
+    const double *f;
+    ENSURE(ipc_recv(ch, &in, &f) != IPC_OK); /* fem_server failed the channel */
+    ipc_close(&ch, IPC_OK);
+    int st;
+    ENSURE(waitpid(pid, &st, 0) == pid);
+    const char *text = slurp(log);
+    ENSURE(text != NULL);
+    if (!WIFEXITED(st) || WEXITSTATUS(st) != 1 || !strstr(text, "sent bad data"))
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    ENSURE(strstr(text, "error: dem_server sent bad data at exchange 0 (t = 0.000000 s): the force on interface "
+                        "node 7 (z) is nan"));
+    ENSURE(!strstr(text, "unstable"));
+    char rm[700];
+    snprintf(rm, sizeof rm, "rm -rf '%s' '%s'", out, log);
+    ENSURE(system(rm) == 0);
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"work_guard_relative", work_guard_relative},
+    {"tire_drift_stopped", tire_drift_stopped},
+    {"tire_moderate_interval_passes", tire_moderate_interval_passes},
+    {"peer_nan_force_named", peer_nan_force_named},
+};
+
+int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

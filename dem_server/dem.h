@@ -335,8 +335,11 @@ dem_bed_params dem_bed_params_default(void);
 typedef int (*dem_bed_progress)(dem_world *w, void *user);
 
 /* Fills w (which must hold no grains) with a settled bed: loads params->file
- * when it exists and its stored parameters match, otherwise places grains
- * randomly without overlap, lets them settle under gravity and saves the file.
+ * when it exists and its stored parameters and settling-code fingerprint
+ * match, otherwise places grains randomly without overlap, lets them settle
+ * under gravity (in a scratch world with w's settings and walls) and saves
+ * the file. Either way w receives the bed as stored (id order, at rest, no
+ * springs), so a run is the same whether its bed was cached or not.
  * Adds the floor (and side walls) to w. *loaded tells which happened. */
 int dem_bed_build(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user, bool *loaded,
                   cm_error *err);
@@ -345,8 +348,10 @@ int dem_bed_place(dem_world *w, const dem_bed_params *params, cm_error *err);
 int dem_bed_settle(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user,
                    cm_error *err);
 int dem_bed_save(const dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
-/* CM_OK when loaded, CM_ERR_STATE (no error text needed) when the file's
- * parameters differ, another error when the file cannot be read. */
+/* CM_OK when loaded; CM_ERR_STATE, the reason in err, when the file's
+ * parameters differ or it was settled by other code (its settling-code
+ * fingerprint, a miniature of the bed settled by this build, differs);
+ * another error when the file cannot be read. */
 int dem_bed_load(dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
 /* Canonical text of everything that determines a bed (materials included). */
 void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf, int len);

@@ -1,6 +1,15 @@
 /* Terrain: random non-overlapping placement of layered grains in a box,
  * settling under gravity, and an HDF5 cache of the settled bed keyed by the
- * full text of the parameters that determine it. */
+ * full text of the parameters that determine it and by a fingerprint of the
+ * code that settles it (bed_code_fingerprint).
+ *
+ * A run starts from the same state whether its bed was just settled or read
+ * from the cache: the bed is settled in a scratch world and handed to the
+ * run's world exactly as a cached bed is (grains in id order, at rest, no
+ * contact springs). Before, a fresh clone's first run (settled in place:
+ * grains in cell order, tangential springs kept) differed from every later
+ * run on the cached bed (tests/coupling tire_small: sinkage 6.4 against
+ * 7.3 mm). */
 #include <errno.h>
 #include <hdf5.h>
 #include <math.h>
@@ -347,67 +356,171 @@ static int h5_attr_string(hid_t obj, const char *name, const char *text)
     return st < 0 ? -1 : 0;
 }
 
-int dem_bed_save(const dem_world *w, const dem_bed_params *p, const char *path, cm_error *err)
+/* A bed as stored: per grain in id order, position, radius, material and,
+ * for shaped grains, orientation, shape id (-1 sphere) and scale. */
+typedef struct bed_arrays {
+    long n;
+    double *xyz, *rad, *q, *sc;
+    int *mat, *sh;
+} bed_arrays;
+
+static void bed_arrays_free(bed_arrays *a)
+{
+    free(a->xyz), free(a->rad), free(a->q), free(a->sc), free(a->mat), free(a->sh);
+    memset(a, 0, sizeof *a);
+}
+
+static int bed_arrays_alloc(bed_arrays *a, long n, int shaped, const char *what, cm_error *err)
+{
+    memset(a, 0, sizeof *a);
+    a->n = n;
+    a->xyz = malloc((size_t)n * 3 * sizeof *a->xyz);
+    a->rad = malloc((size_t)n * sizeof *a->rad);
+    a->mat = malloc((size_t)n * sizeof *a->mat);
+    if (shaped) {
+        a->q = malloc((size_t)n * 4 * sizeof *a->q);
+        a->sc = malloc((size_t)n * sizeof *a->sc);
+        a->sh = malloc((size_t)n * sizeof *a->sh);
+    }
+    if (!a->xyz || !a->rad || !a->mat || (shaped && (!a->q || !a->sc || !a->sh))) {
+        bed_arrays_free(a);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", what);
+    }
+    return CM_OK;
+}
+
+static int bed_arrays_from_world(const dem_world *w, bed_arrays *a, cm_error *err)
 {
     const dem_grains *g = &w->g;
-    int n = g->n;
+    int rc = bed_arrays_alloc(a, g->n, w->n_shaped > 0, "bed", err);
+    for (int id = 0; id < g->n && rc == CM_OK; id++) { /* in id order: a reload gives the same ids */
+        int i = g->slot_of[id];
+        a->xyz[3 * id] = g->x[i], a->xyz[3 * id + 1] = g->y[i], a->xyz[3 * id + 2] = g->z[i];
+        a->rad[id] = g->r[i];
+        a->mat[id] = g->mat[i];
+        if (a->q) {
+            memcpy(a->q + 4 * id, g->q + 4 * i, 4 * sizeof *a->q);
+            a->sc[id] = g->sc[i];
+            a->sh[id] = g->shape[i];
+        }
+    }
+    return rc;
+}
+
+/* Adds the grains of a into w (no grains yet), creating the bed's shapes
+ * first in the same order as when it was placed (the same shape ids). */
+static int bed_arrays_add(dem_world *w, const dem_bed_params *p, const bed_arrays *a, const char *what, cm_error *err)
+{
+    int sh_first[DEM_MAX_LAYERS], sh_count[DEM_MAX_LAYERS];
+    double bfac[DEM_MAX_LAYERS];
+    int rc = CM_OK;
+    if (a->q)
+        rc = bed_shapes(w, p, sh_first, sh_count, bfac, err);
+    for (long i = 0; i < a->n && rc == CM_OK; i++) {
+        const double *x = a->xyz + 3 * i;
+        if (!isfinite(x[0]) || !isfinite(x[1]) || !isfinite(x[2]) || !(a->rad[i] > 0.0))
+            rc = cm_fail(err, CM_ERR_PARSE, "%s: grain %ld has a bad position or radius", what, i);
+        else if (a->q && a->sh[i] >= 0) /* checked by dem_grain_add_shape (shape id, scale) */
+            rc = dem_grain_add_shape(w, x, a->q + 4 * i, a->sh[i], a->sc[i], a->mat[i], NULL, err);
+        else
+            rc = dem_grain_add(w, x, a->rad[i], a->mat[i], NULL, err);
+        if (rc && err)
+            cm_fail_prefix(err, "%s: ", what);
+    }
+    return rc;
+}
+
+/* The settling code's fingerprint: the state hash of a miniature of the bed
+ * (the same materials, layer shapes, seed, fill fraction, world settings and
+ * settling step; at most 24 grains per layer in a box 12 largest radii
+ * wide) after 300 steps. It changes whenever the arithmetic that settles
+ * this bed changes: contact laws, integration, placement, the compiler's
+ * code, and libm's results on this CPU (glibc picks FMA or non-FMA variants
+ * of sin, cos, log, pow, atan2 by CPU, and they differ in the last bit).
+ * A hand-bumped version constant would miss all but the first. */
+static int bed_code_fingerprint(const dem_world *w, const dem_bed_params *p, uint64_t *fp, cm_error *err)
+{
+    dem_bed_params m = *p;
+    m.file[0] = '\0';
+    double rmax = 0.0;
+    long total = 0;
+    for (int k = 0; k < m.n_layers; k++) {
+        m.layers[k].count = m.layers[k].count < 24 ? m.layers[k].count : 24;
+        rmax = fmax(rmax, m.layers[k].radius[1]);
+        total += m.layers[k].count;
+    }
+    double bfac = 1.0;
+    for (int k = 0; k < m.n_layers; k++)
+        if (m.layers[k].shape.type != DEM_SHAPE_SPHERE)
+            bfac = 3.0; /* room for elongated shapes' bounding spheres */
+    for (int d = 0; d < 2; d++)
+        m.box_max[d] = m.box_min[d] + 12.0 * bfac * rmax;
+    dem_world_def def = w->def;
+    def.max_grains = (int)total + 1;
+    if (m.settle_dt > 0.0)
+        def.dt = m.settle_dt;
+    dem_world *s = NULL;
+    int rc = dem_world_create(&def, w->n_mat, w->mat, &s, err);
+    if (rc == CM_OK)
+        rc = add_box_walls(s, &m, err);
+    if (rc == CM_OK)
+        rc = dem_bed_place(s, &m, err);
+    for (int k = 0; k < 300 && rc == CM_OK; k++)
+        rc = dem_step(s, err);
+    if (rc == CM_OK)
+        *fp = dem_world_hash(s) ^ (0x9e3779b97f4a7c15ULL * (uint64_t)s->g.n);
+    else
+        cm_fail_prefix(err, "the settling code's fingerprint (a miniature bed): ");
+    dem_world_destroy(&s);
+    return rc;
+}
+
+
+static int bed_save_arrays(const dem_world *w, const dem_bed_params *p, const bed_arrays *a, uint64_t fp,
+                           const char *path, cm_error *err)
+{
     char text[4096];
     dem_bed_params_text(w, p, text, sizeof text);
-    double *xyz = malloc((size_t)n * 3 * sizeof *xyz), *rad = malloc((size_t)n * sizeof *rad);
-    int *mat = malloc((size_t)n * sizeof *mat);
-    if (!xyz || !rad || !mat) {
-        free(xyz), free(rad), free(mat);
-        return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
-    }
-    for (int id = 0; id < n; id++) { /* in id order: a reload gives the same ids */
-        int i = g->slot_of[id];
-        xyz[3 * id] = g->x[i], xyz[3 * id + 1] = g->y[i], xyz[3 * id + 2] = g->z[i];
-        rad[id] = g->r[i];
-        mat[id] = g->mat[i];
-    }
     /* write to a temporary name, then rename: a crash never leaves a half bed */
     char tmp[1100];
     snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
     int rc = CM_OK;
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
     hid_t f = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
-    if (f < 0) {
-        rc = cm_fail(err, CM_ERR_IO, "%s: cannot create HDF5 file", tmp);
-    } else {
-        hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n};
-        char hs[32];
-        snprintf(hs, sizeof hs, "%016llx", (unsigned long long)fnv1a(text));
-        if (h5_write(f, "position", H5T_NATIVE_DOUBLE, 2, d2, xyz) || h5_write(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, rad) ||
-            h5_write(f, "material", H5T_NATIVE_INT, 1, d1, mat) || h5_attr_string(f, "params", text) ||
-            h5_attr_string(f, "params_hash", hs))
-            rc = cm_fail(err, CM_ERR_IO, "%s: writing the bed failed", tmp);
-        if (rc == CM_OK && w->n_shaped > 0) {
-            /* shaped grains: orientation (n x 4), shape id (-1 sphere) and scale */
-            double *q = malloc((size_t)n * 4 * sizeof *q), *sc = malloc((size_t)n * sizeof *sc);
-            int *sh = malloc((size_t)n * sizeof *sh);
-            hsize_t d4[2] = {(hsize_t)n, 4};
-            if (!q || !sc || !sh)
-                rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
-            for (int id = 0; id < n && rc == CM_OK; id++) {
-                int i = g->slot_of[id];
-                memcpy(q + 4 * id, g->q + 4 * i, 4 * sizeof *q);
-                sc[id] = g->sc[i];
-                sh[id] = g->shape[i];
-            }
-            if (rc == CM_OK &&
-                (h5_write(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, q) || h5_write(f, "shape", H5T_NATIVE_INT, 1, d1, sh) ||
-                 h5_write(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, sc)))
-                rc = cm_fail(err, CM_ERR_IO, "%s: writing the grain shapes failed", tmp);
-            free(q), free(sc), free(sh);
-        }
-        if (H5Fclose(f) < 0 && rc == CM_OK)
-            rc = cm_fail(err, CM_ERR_IO, "%s: closing failed", tmp);
-    }
+    if (f < 0)
+        return cm_fail(err, CM_ERR_IO, "%s: cannot create HDF5 file", tmp);
+    hsize_t d2[2] = {(hsize_t)a->n, 3}, d1[1] = {(hsize_t)a->n}, d4[2] = {(hsize_t)a->n, 4};
+    char hs[32], fs[32];
+    snprintf(hs, sizeof hs, "%016llx", (unsigned long long)fnv1a(text));
+    snprintf(fs, sizeof fs, "%016llx", (unsigned long long)fp);
+    if (h5_write(f, "position", H5T_NATIVE_DOUBLE, 2, d2, a->xyz) ||
+        h5_write(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, a->rad) ||
+        h5_write(f, "material", H5T_NATIVE_INT, 1, d1, a->mat) || h5_attr_string(f, "params", text) ||
+        h5_attr_string(f, "params_hash", hs) || h5_attr_string(f, "code_fingerprint", fs))
+        rc = cm_fail(err, CM_ERR_IO, "%s: writing the bed failed", tmp);
+    /* shaped grains: orientation (n x 4), shape id (-1 sphere) and scale */
+    if (rc == CM_OK && a->q &&
+        (h5_write(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, a->q) || h5_write(f, "shape", H5T_NATIVE_INT, 1, d1, a->sh) ||
+         h5_write(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, a->sc)))
+        rc = cm_fail(err, CM_ERR_IO, "%s: writing the grain shapes failed", tmp);
+    if (H5Fclose(f) < 0 && rc == CM_OK)
+        rc = cm_fail(err, CM_ERR_IO, "%s: closing failed", tmp);
     if (rc == CM_OK && rename(tmp, path) != 0)
         rc = cm_fail(err, CM_ERR_IO, "%s: rename from %s: %s", path, tmp, strerror(errno));
     if (rc)
         unlink(tmp);
-    free(xyz), free(rad), free(mat);
+    return rc;
+}
+
+int dem_bed_save(const dem_world *w, const dem_bed_params *p, const char *path, cm_error *err)
+{
+    uint64_t fp = 0;
+    bed_arrays a;
+    int rc = bed_code_fingerprint(w, p, &fp, err);
+    if (rc == CM_OK && (rc = bed_arrays_from_world(w, &a, err)) == CM_OK) {
+        rc = bed_save_arrays(w, p, &a, fp, path, err);
+        bed_arrays_free(&a);
+    }
     return rc;
 }
 
@@ -450,7 +563,7 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
 {
     if (w->g.n != 0)
         return cm_fail(err, CM_ERR_STATE, "bed %s: the world already holds %d grains", path, w->g.n);
-    char want[4096], have[4096];
+    char want[4096], have[4096], fp_have[64] = "";
     dem_bed_params_text(w, p, want, sizeof want);
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
     hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
@@ -458,7 +571,23 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
         return cm_fail(err, CM_ERR_IO, "%s: cannot open as HDF5", path);
     if (h5_read_attr_string(f, "params", have, sizeof have) || strcmp(have, want) != 0) {
         H5Fclose(f);
-        return CM_ERR_STATE; /* a different bed: the caller regenerates it */
+        return cm_fail(err, CM_ERR_STATE, "holds a bed of other parameters"); /* the caller regenerates it */
+    }
+    /* The code that settled it: a bed this build would not produce is not served. */
+    uint64_t fp = 0;
+    int rc = bed_code_fingerprint(w, p, &fp, err);
+    if (rc) {
+        H5Fclose(f);
+        return rc;
+    }
+    char fp_want[32];
+    snprintf(fp_want, sizeof fp_want, "%016llx", (unsigned long long)fp);
+    if (h5_read_attr_string(f, "code_fingerprint", fp_have, sizeof fp_have) || strcmp(fp_have, fp_want) != 0) {
+        H5Fclose(f);
+        return cm_fail(err, CM_ERR_STATE,
+                       "was settled by other code (settling-code fingerprint %s, this build's %s: the contact laws, "
+                       "integration, compiler or CPU-dependent libm results differ)",
+                       fp_have[0] ? fp_have : "none", fp_want);
     }
     long total = 0;
     for (int k = 0; k < p->n_layers; k++)
@@ -478,39 +607,52 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
         return cm_fail(err, CM_ERR_PARSE, "%s: radius dataset missing or of bad size %ld (expected <= %ld)", path, n,
                        total);
     }
-    double *xyz = malloc((size_t)n * 3 * sizeof *xyz), *rad = malloc((size_t)n * sizeof *rad);
-    int *mat = malloc((size_t)n * sizeof *mat);
     int shaped = 0;
     for (int k = 0; k < p->n_layers; k++)
         shaped |= p->layers[k].shape.type != DEM_SHAPE_SPHERE;
-    double *q = shaped ? malloc((size_t)n * 4 * sizeof *q) : NULL, *sc = shaped ? malloc((size_t)n * sizeof *sc) : NULL;
-    int *sh = shaped ? malloc((size_t)n * sizeof *sh) : NULL;
-    int rc = CM_OK;
+    bed_arrays a;
     hsize_t d2[2] = {(hsize_t)n, 3}, d1[1] = {(hsize_t)n}, d4[2] = {(hsize_t)n, 4};
-    if (!xyz || !rad || !mat || (shaped && (!q || !sc || !sh)))
-        rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
-    else if (h5_read(f, "position", H5T_NATIVE_DOUBLE, 2, d2, xyz) || h5_read(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, rad) ||
-             h5_read(f, "material", H5T_NATIVE_INT, 1, d1, mat))
-        rc = cm_fail(err, CM_ERR_PARSE, "%s: position/radius/material datasets unreadable", path);
-    else if (shaped && (h5_read(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, q) ||
-                        h5_read(f, "shape", H5T_NATIVE_INT, 1, d1, sh) || h5_read(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, sc)))
-        rc = cm_fail(err, CM_ERR_PARSE, "%s: orientation/shape/scale datasets unreadable", path);
-    H5Fclose(f);
-    int sh_first[DEM_MAX_LAYERS], sh_count[DEM_MAX_LAYERS];
-    double bfac[DEM_MAX_LAYERS];
-    if (rc == CM_OK && shaped)
-        rc = bed_shapes(w, p, sh_first, sh_count, bfac, err); /* the same shapes, the same ids */
-    for (long i = 0; i < n && rc == CM_OK; i++) {
-        if (!isfinite(xyz[3 * i]) || !isfinite(xyz[3 * i + 1]) || !isfinite(xyz[3 * i + 2]) || !(rad[i] > 0.0))
-            rc = cm_fail(err, CM_ERR_PARSE, "%s: grain %ld has a bad position or radius", path, i);
-        else if (shaped && sh[i] >= 0) /* checked by dem_grain_add_shape (shape id, scale) */
-            rc = dem_grain_add_shape(w, xyz + 3 * i, q + 4 * i, sh[i], sc[i], mat[i], NULL, err);
-        else
-            rc = dem_grain_add(w, xyz + 3 * i, rad[i], mat[i], NULL, err);
-        if (rc && err)
-            cm_fail_prefix(err, "%s: ", path);
+    if ((rc = bed_arrays_alloc(&a, n, shaped, path, err)) == CM_OK) {
+        if (h5_read(f, "position", H5T_NATIVE_DOUBLE, 2, d2, a.xyz) || h5_read(f, "radius", H5T_NATIVE_DOUBLE, 1, d1, a.rad) ||
+            h5_read(f, "material", H5T_NATIVE_INT, 1, d1, a.mat))
+            rc = cm_fail(err, CM_ERR_PARSE, "%s: position/radius/material datasets unreadable", path);
+        else if (shaped && (h5_read(f, "orientation", H5T_NATIVE_DOUBLE, 2, d4, a.q) ||
+                            h5_read(f, "shape", H5T_NATIVE_INT, 1, d1, a.sh) ||
+                            h5_read(f, "scale", H5T_NATIVE_DOUBLE, 1, d1, a.sc)))
+            rc = cm_fail(err, CM_ERR_PARSE, "%s: orientation/shape/scale datasets unreadable", path);
     }
-    free(xyz), free(rad), free(mat), free(q), free(sc), free(sh);
+    H5Fclose(f);
+    if (rc == CM_OK)
+        rc = bed_arrays_add(w, p, &a, path, err);
+    bed_arrays_free(&a);
+    return rc;
+}
+
+/* Places and settles the bed in a scratch world with w's settings,
+ * materials and walls (w itself holds no grains yet), then hands it over as
+ * a cached bed would be, saving it first when p->file is set. */
+static int bed_settle_scratch(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, cm_error *err)
+{
+    dem_world *s = NULL;
+    int rc = dem_world_create(&w->def, w->n_mat, w->mat, &s, err);
+    for (int k = 0; k < w->n_walls && rc == CM_OK; k++) /* the scene's walls and the box, in w's order */
+        rc = dem_wall_add(s, w->walls[k].p, w->walls[k].n, w->walls[k].material, err);
+    if (rc == CM_OK && (rc = dem_bed_place(s, p, err)) == CM_OK)
+        rc = dem_bed_settle(s, p, cb, user, err);
+    bed_arrays a;
+    memset(&a, 0, sizeof a);
+    if (rc == CM_OK)
+        rc = bed_arrays_from_world(s, &a, err);
+    if (rc == CM_OK && p->file[0]) {
+        uint64_t fp = 0;
+        if ((rc = bed_code_fingerprint(w, p, &fp, err)) == CM_OK &&
+            (rc = bed_save_arrays(w, p, &a, fp, p->file, err)) == CM_OK)
+            cm_log_info("bed saved to %s (settling-code fingerprint %016llx)", p->file, (unsigned long long)fp);
+    }
+    if (rc == CM_OK)
+        rc = bed_arrays_add(w, p, &a, "settled bed", err);
+    bed_arrays_free(&a);
+    dem_world_destroy(&s);
     return rc;
 }
 
@@ -521,24 +663,21 @@ int dem_bed_build(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, vo
     if (rc)
         return rc;
     if (p->file[0] && access(p->file, R_OK) == 0) {
-        rc = dem_bed_load(w, p, p->file, err);
+        cm_error why = {0};
+        rc = dem_bed_load(w, p, p->file, &why);
         if (rc == CM_OK) {
             *loaded = true;
             cm_log_info("bed loaded from %s (%d grains)", p->file, w->g.n);
             return CM_OK;
         }
-        if (rc != CM_ERR_STATE)
+        if (rc != CM_ERR_STATE) {
+            if (err)
+                *err = why;
             return rc;
-        cm_log_info("bed file %s holds a bed of other parameters: regenerating", p->file);
+        }
+        cm_log_info("bed file %s %s: settling the bed again", p->file, why.msg);
     }
-    if ((rc = dem_bed_place(w, p, err)) || (rc = dem_bed_settle(w, p, cb, user, err)))
-        return rc;
-    if (p->file[0]) {
-        rc = dem_bed_save(w, p, p->file, err);
-        if (rc == CM_OK)
-            cm_log_info("bed saved to %s", p->file);
-    }
-    return rc;
+    return bed_settle_scratch(w, p, cb, user, err);
 }
 
 double dem_bed_height(const dem_world *w)

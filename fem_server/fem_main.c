@@ -14,7 +14,7 @@
  * the interval and answers the new interface positions and velocities: one
  * fem_exchange() per exchange, a pipeline of timed stages (fem_exchange.h).
  * Records traction, load, sinkage and energies every exchange; at the end
- * (finish_run) prints the traction summary over the detected steady part
+ * (finish_run) writes and prints the traction summary (fem_summary.c) over the detected steady part
  * and the stages' profile, which it also writes to wheel.h5.
  * Checkpoints (ipc/PROTOCOL.md): this side decides when both save the state
  * after an exchange: every run.checkpoint_every, and when either side is
@@ -37,7 +37,7 @@
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
-#include "steady.h"
+#include "fem_summary.h" /* [traction] */
 #include "timer.h"
 
 /* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
@@ -68,63 +68,12 @@ static int after_advance(fem_model *m, void *user, long exchange, cm_error *err)
     return fem_output_due(m, err);
 }
 
-static void print_summary_line(const char *name, const double *x, size_t n, size_t start)
-{
-    steady_stats st;
-    steady_summary(x, n, start, &st);
-    cm_log_info("  %-4s mean %9.2f N  (95%% CI +-%7.2f N, %d batches)  min %9.2f  max %9.2f", name, st.mean,
-                st.half_width, st.batches, st.min, st.max);
-}
-
 static const char *const k_control_names[] = {"slip", "torque", "drawbar"};
-
-/* The traction summary over the steady part of the travel. Under torque or
- * drawbar control the slip is the outcome and settles too: the steady part
- * starts where both the drawbar pull and the slip are steady. */
-static void print_traction_summary(const drive_def *d, const series_buf *tr, double interval)
-{
-    size_t start = steady_start(tr->col[SER_TP], tr->n);
-    if (d->control != DRIVE_CONTROL_SLIP) {
-        size_t s_slip = steady_start(tr->col[SER_SLIP], tr->n);
-        start = s_slip > start ? s_slip : start;
-    }
-    char what[160];
-    if (d->control == DRIVE_CONTROL_SLIP)
-        snprintf(what, sizeof what, "slip %.1f %%", 100 * d->slip);
-    else if (d->control == DRIVE_CONTROL_TORQUE)
-        snprintf(what, sizeof what, "axle torque %g N m at v = %g m/s", d->torque, d->velocity);
-    else
-        snprintf(what, sizeof what, "drawbar load %g N at omega = %g rad/s", d->drawbar, d->omega);
-    cm_log_info("traction over the steady part of the travel: from exchange %zu of %zu (t = %.3f s after "
-                "travel began), %s",
-                start, tr->n, (double)start * interval, what);
-    print_summary_line("T_H", tr->col[SER_TH], tr->n, start);
-    print_summary_line("T_R", tr->col[SER_TR], tr->n, start);
-    print_summary_line("T_P", tr->col[SER_TP], tr->n, start);
-    steady_stats st;
-    steady_summary(tr->col[SER_SINK], tr->n, start, &st);
-    cm_log_info("  sinkage mean %.1f mm (95%% CI +-%.1f mm)", 1e3 * st.mean, 1e3 * st.half_width);
-    if (d->control == DRIVE_CONTROL_SLIP)
-        return;
-    steady_summary(tr->col[SER_SLIP], tr->n, start, &st);
-    cm_log_info("  slip mean %.2f %% (95%% CI +-%.2f %%)  min %.2f %%  max %.2f %% (realised, %s control)",
-                100 * st.mean, 100 * st.half_width, 100 * st.min, 100 * st.max, k_control_names[d->control]);
-    /* The equation of motion's balance: the soil carries what is prescribed. */
-    if (d->control == DRIVE_CONTROL_TORQUE) {
-        steady_summary(tr->col[SER_MY], tr->n, start, &st);
-        cm_log_info("  soil moment about the axle mean %.3f N m (95%% CI +-%.3f N m) against the axle torque %g N m",
-                    st.mean, st.half_width, d->torque);
-    } else {
-        steady_summary(tr->col[SER_FX], tr->n, start, &st);
-        cm_log_info("  soil force along the travel mean %.2f N (95%% CI +-%.2f N) against the drawbar load %g N",
-                    st.mean, st.half_width, d->drawbar);
-    }
-}
 
 /* The end of a coupled run: the summaries of what the run measured. The
  * machine-readable summary (issue 18, fem_server/steady.c's owner) is
  * written here too, next to the profile: see the marked line. */
-static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, cm_error *err)
+static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, double lug_period, cm_error *err)
 {
     const drive_def *drive = c->drive;
     ipc_stats st = ipc_get_stats(c->ch);
@@ -139,21 +88,24 @@ static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, cm_error *err
     cm_log_info("interface work of the grains on the tire: seen by the DEM %.6g J, by the FEM %.6g J; FEM - DEM "
                 "= %.3g J (%.2g %% of the larger), the coupling's own error at exchange interval %.3g s",
                 w_dem, w_fem, w_fem - w_dem, wmax > 0 ? 100 * (w_fem - w_dem) / wmax : 0.0, c->interval);
-    if (c->travel.n > 0) {
-        print_traction_summary(drive, &c->travel, c->interval);
-        if (drive->control != DRIVE_CONTROL_SLIP)
-            cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
-                        c->ds.rate_limited, c->travel.n);
-    } else {
-        cm_log_info("the wheel never reached the travel phase (target load %g N): no traction summary",
-                    drive->target_load);
-    }
     fem_profile_print(&c->prof);
     int rc = fem_profile_write(&c->prof, h5, err);
-    /* >>> the machine-readable summary (wheel.h5:/summary + JSON) is written here <<< */
-    if (rc)
+    if (rc || (rc = cm_h5_flush(h5, err)))
         return rc;
-    cm_log_info("results: %s/traction.csv, %s/wheel.h5", o->out, o->out);
+    /* [traction] The summary, from the recorded series (fem_summary.c):
+     * wheel.h5:/summary and summary.json; logged there. */
+    fem_summary_def sdef = {.out_dir = o->out, .scene = o->scene, .control = drive->control,
+                            .motion = drive->motion, .target_load = drive->target_load, .radius = drive->radius,
+                            .interval = c->interval, .lug_period = lug_period, .slip = drive->slip,
+                            .torque = drive->torque, .drawbar = drive->drawbar,
+                            .fem_state_hash = fem_state_hash(c->model)};
+    if ((rc = fem_summary_write(&sdef, err)) < 0)
+        return rc;
+    /* [/traction] */
+    if (c->travel.n > 0 && drive->control != DRIVE_CONTROL_SLIP)
+        cm_log_info("  wheel.max_accel or a stop limited the motion at %ld of %zu travel exchanges",
+                    c->ds.rate_limited, c->travel.n);
+    cm_log_info("results: %s/traction.csv, %s/wheel.h5, %s/summary.json", o->out, o->out, o->out);
     cm_log_info("final state: fem_state_hash %016llx", (unsigned long long)fem_state_hash(c->model));
     return CM_OK;
 }
@@ -406,7 +358,7 @@ static int run(const options *o)
         exit_code = g_stop ? 128 + (int)g_stop : 3;
         goto cleanup;
     }
-    if ((rc = finish_run(o, &c, h5, &err)))
+    if ((rc = finish_run(o, &c, h5, cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0, &err)))
         goto fail;
     exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
     clean_stop = 1;

@@ -1,6 +1,7 @@
 #include "steady.h"
 
 #include <math.h>
+#include <stdlib.h>
 
 double steady_t95(int dof)
 {
@@ -47,12 +48,61 @@ size_t steady_start(const double *x, size_t n)
     return best_d * B;
 }
 
+double steady_iat(const double *x, size_t n)
+{
+    if (n < 8)
+        return 1.0;
+    size_t b0 = (n + 4095) / 4096; /* block length: at most 4096 blocks */
+    size_t m = n / b0;
+    double *y = malloc(m * sizeof *y);
+    if (!y)
+        return (double)n; /* no memory: the most cautious answer (one batch) */
+    double mean = 0;
+    for (size_t j = 0; j < m; j++) {
+        double z = 0;
+        for (size_t k = 0; k < b0; k++)
+            z += x[j * b0 + k];
+        y[j] = z / (double)b0;
+        mean += y[j];
+    }
+    mean /= (double)m;
+    double c0 = 0, v0 = 0;
+    for (size_t j = 0; j < m; j++) {
+        y[j] -= mean;
+        c0 += y[j] * y[j];
+    }
+    for (size_t i = 0; i < m * b0; i++)
+        v0 += (x[i] - mean) * (x[i] - mean);
+    double tau = 1.0;
+    /* constant to round-off (a prescribed sinkage): uncorrelated by definition */
+    if (c0 > 1e-24 * (double)m * (mean * mean + 1e-300)) {
+        for (size_t k = 1; k < m / 2; k++) {
+            double ck = 0;
+            for (size_t j = 0; j + k < m; j++)
+                ck += y[j] * y[j + k];
+            tau += 2.0 * ck / c0;
+            if ((double)k >= 5.0 * tau) /* Sokal's window: stop once k >= 5 tau */
+                break;
+        }
+    }
+    free(y);
+    /* back to samples: the block means' variance is sigma^2 tau / b0 (blocks
+     * longer than tau) and their own correlation time tau_b counts blocks
+     * (blocks shorter than tau), so tau = tau_b b0 var(block means) / var(x)
+     * holds in both limits */
+    if (b0 > 1 && v0 > 0)
+        tau *= (double)b0 * (c0 / (double)m) / (v0 / (double)(m * b0));
+    return tau < 1.0 ? 1.0 : tau;
+}
+
 void steady_summary(const double *x, size_t n, size_t start, steady_stats *out)
 {
     out->start = start < n ? start : n;
     out->count = n - out->start;
-    out->mean = out->min = out->max = out->half_width = 0;
+    out->mean = out->min = out->max = out->sd = out->half_width = 0;
+    out->tau = 1.0;
     out->batches = 0;
+    out->short_series = 1;
     if (out->count == 0)
         return;
     const double *y = x + out->start;
@@ -66,21 +116,67 @@ void steady_summary(const double *x, size_t n, size_t start, steady_stats *out)
     out->mean = sum / (double)c;
     out->min = mn;
     out->max = mx;
-    int b = c >= 40 ? 20 : (int)(c / 2);
-    if (b < 2)
+    double ss = 0;
+    for (size_t i = 0; i < c; i++)
+        ss += (y[i] - out->mean) * (y[i] - out->mean);
+    out->sd = c > 1 ? sqrt(ss / (double)(c - 1)) : 0.0;
+    if (c < 2)
         return;
-    size_t len = c / (size_t)b;
+    out->tau = steady_iat(y, c);
+    /* batches of at least 5 tau, at most 20 of them */
+    size_t len = (size_t)ceil(5.0 * out->tau);
+    size_t b = c / (len > 0 ? len : 1);
+    if (b > 20)
+        b = 20;
+    if (b < 4) {
+        out->half_width = 1.960 * out->sd * sqrt(out->tau / (double)c);
+        return;
+    }
+    len = c / b;
     double bs = 0, bss = 0;
-    for (int k = 0; k < b; k++) {
+    for (size_t k = 0; k < b; k++) {
         double z = 0;
         for (size_t i = 0; i < len; i++)
-            z += y[(size_t)k * len + i];
+            z += y[k * len + i];
         z /= (double)len;
         bs += z;
         bss += z * z;
     }
-    double bm = bs / b;
-    double var = (bss - b * bm * bm) / (b - 1);
-    out->half_width = steady_t95(b - 1) * sqrt(var > 0 ? var / b : 0);
-    out->batches = b;
+    double bm = bs / (double)b;
+    double var = (bss - (double)b * bm * bm) / (double)(b - 1);
+    out->half_width = steady_t95((int)b - 1) * sqrt(var > 0 ? var / (double)b : 0);
+    out->batches = (int)b;
+    out->short_series = 0;
+}
+
+size_t steady_lug_window(const double *angle, size_t n, size_t start, double period)
+{
+    if (!(period > 0) || start >= n)
+        return n;
+    double turned = fabs(angle[n - 1] - angle[start]);
+    double k = floor(turned / period);
+    if (k < 1)
+        return n;
+    for (size_t i = start; i < n; i++)
+        if (fabs(angle[i] - angle[start]) >= k * period)
+            return i;
+    return n;
+}
+
+void steady_profile(const double *x, const double *angle, size_t start, size_t end, double period, int bins,
+                    double *mean, int *count)
+{
+    for (int b = 0; b < bins; b++)
+        mean[b] = 0, count[b] = 0;
+    if (!(period > 0) || bins < 1)
+        return;
+    for (size_t i = start; i < end; i++) {
+        double ph = fabs(angle[i] - angle[start]) / period;
+        int b = (int)((ph - floor(ph)) * bins);
+        b = b < 0 ? 0 : b >= bins ? bins - 1 : b;
+        mean[b] += x[i];
+        count[b]++;
+    }
+    for (int b = 0; b < bins; b++)
+        mean[b] = count[b] ? mean[b] / count[b] : 0.0;
 }

@@ -8,11 +8,13 @@ OUTDIR is a run's output folder (./run SCENE --out OUTDIR; default
 out/<scene name>). Writes into OUTDIR (or --png-dir):
 
   run_series.png    vertical load, T_H, T_R, T_P and sinkage against time,
-                    phases shaded, the steady start (MSER-5 on T_P, as
-                    fem_server) marked and the steady means drawn
+                    phases shaded, the steady part fem_server averaged
+                    (summary.json: every quantity past its transient, whole
+                    lug periods) marked and its means drawn
   run_traction.png  bar chart of T_H, T_R, T_P over the steady part: mean,
                     min and max, and the 95 % confidence interval of the mean
-                    (as fig. 15 of Michael et al.)
+                    (as fig. 15 of Michael et al.), with the mean vertical
+                    load they were measured under and T/W
   run_side_<t>.png  side view (from -y) of the deformed tire coloured by
                     eps33, the vertical strain; grains behind the wheel's
                     mid-plane as discs coloured by their x velocity
@@ -41,7 +43,6 @@ sys.path.insert(0, HERE)
 import numpy as np  # noqa: E402
 
 import runio  # noqa: E402
-import steady  # noqa: E402
 
 import matplotlib  # noqa: E402
 
@@ -82,13 +83,15 @@ def moving_average(x, w):
     return np.concatenate([np.full(pad, np.nan), m, np.full(len(x) - len(m) - pad, np.nan)])
 
 
-def travel_summary(d):
-    """(start index in the travel phase, steady start time, travel indices, stats)."""
-    start, n, stats = steady.travel_statistics(d, ("T_H", "T_R", "T_P", "sinkage", "Fz"))
-    if start is None:
+def travel_summary(outdir, d):
+    """(steady start time, steady end time, travel indices, stats) from the
+    run's summary.json (fem_server computes them; nothing is recomputed
+    here), or None when the run has none or never travelled."""
+    s = runio.read_summary(outdir)
+    if s is None or not s.get("travelled"):
         return None
     idx = np.flatnonzero(np.round(d["phase"]).astype(int) == 1)
-    return start, float(d["t"][idx[start]]) if start < len(idx) else float(d["t"][idx[-1]]), idx, stats
+    return s["steady"]["start_time"], s["steady"]["end_time"], idx, s["stats"]
 
 
 def plot_series(d, summary, path, title):
@@ -109,12 +112,11 @@ def plot_series(d, summary, path, title):
             ax.plot(t, moving_average(y, w), color="C0", lw=1.2, zorder=2,
                     label="%.0f ms moving average" % (w * dt * 1e3))
         if summary is not None:
-            start, ts, idx, stats = summary
+            ts, t_end, idx, stats = summary
             ax.axvline(ts, color="C3", ls="--", lw=1.2, zorder=3,
-                       label="steady start (MSER-5), t = %.3f s" % ts)
+                       label="steady part from t = %.3f s" % ts)
             if col in stats:
                 st = stats[col]
-                t_end = t[idx[-1]]
                 ax.hlines(st.mean * scale, ts, t_end, color="C3", lw=1.8, zorder=4,
                           label="steady mean %.4g ± %.2g" % (st.mean * scale, st.half_width * scale))
                 # keep the axis on the interesting range: the raw signal has
@@ -142,7 +144,7 @@ def plot_series(d, summary, path, title):
 
 
 def plot_traction_bars(summary, slip, path, title):
-    start, ts, idx, stats = summary
+    ts, te, idx, stats = summary
     names = ["T_H", "T_R", "T_P"]
     labels = ["$T_H$\ngross traction", "$T_R$\nrunning resistance", "$T_P$\ndrawbar pull"]
     means = np.array([stats[k].mean for k in names])
@@ -158,13 +160,15 @@ def plot_traction_bars(summary, slip, path, title):
                 label="95 % CI of the mean (batch means)")
     ax.axhline(0, color="k", lw=0.6)
     ax.set_xticks(x)
-    ax.set_xticklabels(["%s\n%.1f ± %.1f N\n[%.0f, %.0f]" % (lab, m, c, lo, hi)
-                        for lab, m, c, lo, hi in zip(labels, means, ci, mins, maxs)])
+    ax.set_xticklabels(["%s\n%.1f ± %.1f N\n[%.0f, %.0f]\n%s/W = %.3f ± %.3f" % (
+                        lab, m, c, lo, hi, k, stats[k + "_per_W"].mean, stats[k + "_per_W"].half_width)
+                        for k, lab, m, c, lo, hi in zip(names, labels, means, ci, mins, maxs)])
     ax.set_ylabel("force [N]")
     ax.set_xlabel("steady mean ± 95 % CI [min, max]", fontsize=8)
     n = stats["T_P"].count
-    ax.set_title("%s\nslip %.1f %%, steady part from t = %.3f s (%d exchanges)" % (title, 100 * slip, ts, n),
-                 fontsize=10)
+    W = stats["load"]
+    ax.set_title("%s\nslip %.1f %%, load W = %.1f ± %.1f N, steady part t = %.3f to %.3f s (%d exchanges)"
+                 % (title, 100 * slip, W.mean, W.half_width, ts, te, n), fontsize=10)
     ax.legend(fontsize=8, loc="best")
     ax.grid(True, axis="y", lw=0.3)
     fig.tight_layout()
@@ -433,13 +437,13 @@ def main(argv=None):
         log("no traction.csv in %s: no time series" % outdir)
     summary = None
     if d is not None:
-        summary = travel_summary(d)
+        summary = travel_summary(outdir, d)
         if summary is None:
-            log("the wheel never reached the travel phase: no steady statistics")
+            log("no summary.json of a travelled run: no steady statistics")
         else:
-            start, ts, idx, stats = summary
-            log("steady part of the travel: from exchange %d of %d (t = %.4f s)" % (start, len(idx), ts))
-            for k in ("T_H", "T_R", "T_P"):
+            ts, te, idx, stats = summary
+            log("steady part of the travel (fem_server's summary.json): t = %.4f to %.4f s" % (ts, te))
+            for k in ("T_H", "T_R", "T_P", "load"):
                 st = stats[k]
                 log("  %-4s mean %9.2f N  (95%% CI +-%7.2f N, %d batches)  min %9.2f  max %9.2f"
                     % (k, st.mean, st.half_width, st.batches, st.min, st.max))

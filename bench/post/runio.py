@@ -165,3 +165,30 @@ def read_scene_wheel_y(outdir):
         if c:
             return float(c.group(2))
     return None
+
+
+class Stat:
+    """One quantity of a run's summary (fem_server/fem_summary.c): mean,
+    half_width (95 %), sd (time scatter), min, max, tau_s (correlation
+    time), samples, batches, short_series."""
+
+    def __init__(self, d):
+        self.__dict__.update(d)
+        self.count = d.get("samples", 0)
+
+
+def read_summary(run_dir):
+    """The run's summary.json (written by fem_server at the end of a run) as
+    a dict, with "stats" mapping quantity names to Stat objects (and "Fz" as
+    an alias of "load", the traction.csv column name); None when the run
+    wrote none (failed, or still running)."""
+    import json
+    path = os.path.join(run_dir, "summary.json")
+    if not os.path.exists(path):
+        return None
+    with open(path) as f:
+        s = json.load(f)
+    s["stats"] = {k: Stat(v) for k, v in s.get("quantities", {}).items()}
+    if "load" in s["stats"]:
+        s["stats"]["Fz"] = s["stats"]["load"]
+    return s

@@ -3,7 +3,8 @@
 
 usage: bench/study/choose.py SCENE [--accuracy QUANTITY=TOLERANCE] [--results DIR]
 
-The target is --accuracy (e.g. drawbar_pull=5% or sinkage=0.02) or, without
+The target is --accuracy (e.g. drawbar_coefficient=0.02, drawbar_pull=5% or
+sinkage=0.02) or, without
 it, the scene's own `run.target = { quantity = "drawbar_pull"; tolerance =
 0.05; study = "tire_small"; };` (study: optional, default the scene file's
 name). The results are DIR/study-<study>.csv (default bench/results, or
@@ -11,7 +12,13 @@ $DEMFEM_STUDY_RESULTS), written by bench/study/run.
 
 Among the study's runs that finished stable and whose relative error of the
 quantity is within the tolerance, the one with the shortest wall time is
-chosen. Its settings (the knobs of that run, not the study's shortened
+chosen. Traction is best asked per actual load: drawbar_coefficient (T_P/W),
+gross_traction_coefficient (T_H/W), running_resistance_coefficient (T_R/W)
+and sinkage_per_radius (sinkage/R) take an ABSOLUTE tolerance (0.02 means
+|T_P/W - reference| <= 0.02; a percentage is refused for them): the drawbar
+pull crosses zero near 10-15 % slip, where an error relative to it means
+nothing. The other quantities take a relative tolerance (5% or 0.05).
+Its settings (the knobs of that run, not the study's shortened
 travel) go to stdout, one KEY=VALUE per line, for `./run` to pass as --set;
 what was chosen and why goes to stderr. A run's error is measured against
 the study's reference (its finest run, whose own error is taken as its 95 %
@@ -34,8 +41,17 @@ sys.path.insert(0, os.path.join(ROOT, "bench", "post"))
 
 import scenecfg  # noqa: E402
 
-QUANTITIES = ("drawbar_pull", "gross_traction", "sinkage", "deflection", "contact_time", "peak_force",
-              "restitution")
+QUANTITIES = ("drawbar_coefficient", "gross_traction_coefficient", "running_resistance_coefficient",
+              "sinkage_per_radius", "drawbar_pull", "gross_traction", "sinkage", "deflection", "contact_time",
+              "peak_force", "restitution")
+# Errors in absolute terms (bench/study/run writes |value - reference| for these).
+ABSOLUTE = ("drawbar_coefficient", "gross_traction_coefficient", "running_resistance_coefficient",
+            "sinkage_per_radius")
+
+
+def show(q, v):
+    """A tolerance or error as the quantity measures it."""
+    return "%.3g (absolute)" % v if q in ABSOLUTE else "%.3g %%" % (100 * v)
 
 
 class Refusal(Exception):
@@ -69,8 +85,11 @@ def target_of(scene_path, accuracy):
     if accuracy:
         if "=" not in accuracy:
             raise Refusal(2, "--accuracy %s: expected QUANTITY=TOLERANCE, e.g. drawbar_pull=5%%" % accuracy)
-        q, tol = accuracy.split("=", 1)
-        q, tol = q.strip(), parse_tolerance(tol)
+        q, tol_text = accuracy.split("=", 1)
+        q, tol = q.strip(), parse_tolerance(tol_text)
+        if q in ABSOLUTE and tol_text.strip().endswith("%"):
+            raise Refusal(2, "%s is measured in absolute terms (per load or per radius): write e.g. %s=0.02, "
+                             "not a percentage" % (q, q))
     else:
         try:
             q = scenecfg.get(text, "run.target.quantity").strip().strip('"')
@@ -92,17 +111,18 @@ def choose(rows, quantity, tol, source):
         raise Refusal(2, "%s has no column %s (a study of another kind of scene?)" % (source, quantity))
     ref = [r for r in rows if r["run"] == "reference" and r["status"] == "ok"]
     noise = 0.0
-    if ref and math.isfinite(fnum(ref[0].get(quantity + "_ci95"))) and fnum(ref[0][quantity]):
-        noise = abs(fnum(ref[0][quantity + "_ci95"]) / fnum(ref[0][quantity]))
+    absolute = quantity in ABSOLUTE
+    if ref and math.isfinite(fnum(ref[0].get(quantity + "_ci95"))) and (absolute or fnum(ref[0][quantity])):
+        noise = abs(fnum(ref[0][quantity + "_ci95"]) / (1.0 if absolute else fnum(ref[0][quantity])))
     if tol < noise:
-        raise Refusal(3, "the study cannot tell %s to %.3g %%: its reference run's own 95 %% confidence interval "
-                         "is +-%.3g %% (%s); ask for at least that, or rerun the study with a longer travel"
-                      % (quantity, 100 * tol, 100 * noise, source))
+        raise Refusal(3, "the study cannot tell %s to %s: its reference run's own 95 %% confidence interval "
+                         "is +-%s (%s); ask for at least that, or rerun the study with a longer travel"
+                      % (quantity, show(quantity, tol), show(quantity, noise), source))
     spread = fnum(rows[0].get(quantity + "_noise"))
     if math.isfinite(spread) and tol < spread:
-        raise Refusal(3, "the study cannot tell %s to %.3g %%: the same settings with another random bed differ "
-                         "by %.3g %% (%s, column %s_noise); ask for at least that"
-                      % (quantity, 100 * tol, 100 * spread, source, quantity))
+        raise Refusal(3, "the study cannot tell %s to %s: the same settings with another random bed differ "
+                         "by %s (%s, column %s_noise); ask for at least that"
+                      % (quantity, show(quantity, tol), show(quantity, spread), source, quantity))
     scored = []
     for r in rows:
         if r["status"] != "ok" or r.get("stable") != "yes" or r["knob"] == "dem.bed.seed":
@@ -116,15 +136,15 @@ def choose(rows, quantity, tol, source):
     met = sorted([s for s in scored if s[1] <= tol], key=lambda s: (s[0], s[1]))
     if not met:
         best = min(scored, key=lambda s: s[1])
-        raise Refusal(3, "no setting in %s met %s within %.3g %%: the best was %.3g %% (run '%s', %.1f s: %s)"
-                      % (source, quantity, 100 * tol, 100 * best[1], best[2]["run"], best[0],
+        raise Refusal(3, "no setting in %s met %s within %s: the best was %s (run '%s', %.1f s: %s)"
+                      % (source, quantity, show(quantity, tol), show(quantity, best[1]), best[2]["run"], best[0],
                          best[2]["settings"] or "the study's base"))
     w, e, r = met[0]
     slowest = max(s[0] for s in met)
-    why = ("%s within %.3g %%: chose run '%s' of %s: error %.3g %% in %.1f s of wall time, the fastest of the %d "
+    why = ("%s within %s: chose run '%s' of %s: error %s in %.1f s of wall time, the fastest of the %d "
            "stable runs that met it (they took %.1f to %.1f s; %d did not meet it)%s"
-           % (quantity, 100 * tol, r["run"], source, 100 * e, w, len(met), w, slowest, len(scored) - len(met),
-              "; the reference's own 95 %% CI is +-%.3g %%" % (100 * noise) if noise else ""))
+           % (quantity, show(quantity, tol), r["run"], source, show(quantity, e), w, len(met), w, slowest,
+              len(scored) - len(met), "; the reference's own 95 %% CI is +-%s" % show(quantity, noise) if noise else ""))
     return r, why
 
 

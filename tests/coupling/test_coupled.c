@@ -373,10 +373,12 @@ static int guard_grain_overlap(void)
 
 /* A DEM step 30 times its limit (allowed) with the overlap guard off and the
  * tire far above the bed: the bed blows up to non-finite positions within a
- * few steps and the DEM side stops naming the step to reduce. */
+ * few steps and the DEM side stops naming the step to reduce. (1 m above:
+ * at 0.5 m grains thrown up by the blow-up reached the tire first and the
+ * FEM's interface-work guard fired, since the bed is handed over as cached.) */
 static int guard_grain_non_finite(void)
 {
-    const char *extra[] = {"--set", "wheel.start_gap=0.5", "--set", "wheel.sink_velocity=1e-6", "--set",
+    const char *extra[] = {"--set", "wheel.start_gap=1.0", "--set", "wheel.sink_velocity=1e-6", "--set",
                            "coupling.dt=2e-3", "--set", "dem.allow_unstable_dt=true", "--set",
                            "coupling.max_overlap=0.0", "--set", "run.end_time=2.0", NULL};
     return stopped_by_guard(SCENES "tire_small.cfg", "nonfinite", extra, "dem", "non-finite", "coupling.dt");

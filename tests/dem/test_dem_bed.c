@@ -4,6 +4,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <hdf5.h>
+
 #include "scene.h"
 #include "test_dem_common.h"
 
@@ -164,6 +166,113 @@ static int bed_cache(void)
     return 0;
 }
 
+/* A run starts from the same state whether its bed was just settled or read
+ * from the cache: after 400 steps both worlds hash the same. (Before the bed
+ * was handed over as stored, the settled world kept its cell order and its
+ * tangential springs and the two runs parted.) */
+static int settled_equals_cached(void)
+{
+    char path[] = "/tmp/dem_bed_same_XXXXXX";
+    int fd = mkstemp(path);
+    ENSURE(fd >= 0);
+    close(fd);
+    unlink(path);
+    dem_bed_params p = small_bed(200);
+    p.settle_min_time = 0.02;
+    p.settle_ke = 1e-6;
+    snprintf(p.file, sizeof p.file, "%s", path);
+    cm_error err = {0};
+    bool loaded;
+    dem_world *a = bed_world(200, 1), *b = bed_world(200, 1);
+    ENSURE(a && b);
+    ENSURE_MSG(dem_bed_build(a, &p, NULL, NULL, &loaded, &err) == 0 && !loaded, "%s", err.msg);
+    ENSURE_MSG(dem_bed_build(b, &p, NULL, NULL, &loaded, &err) == 0 && loaded, "%s", err.msg);
+    ENSURE(dem_world_hash(a) == dem_world_hash(b));
+    /* shake the bed: a tilted gravity would do, a few hundred steps of it
+     * settling further is enough to expose springs or a summation order */
+    for (int k = 0; k < 400; k++) {
+        ENSURE(dem_step(a, &err) == 0);
+        ENSURE(dem_step(b, &err) == 0);
+    }
+    ENSURE_MSG(dem_world_hash(a) == dem_world_hash(b), "settled %016llx, cached %016llx",
+               (unsigned long long)dem_world_hash(a), (unsigned long long)dem_world_hash(b));
+    dem_world_destroy(&a);
+    dem_world_destroy(&b);
+    unlink(path);
+    return 0;
+}
+
+/* A cache written by other settling code (another fingerprint, or none, as
+ * every bed saved before fingerprints) is refused with the reason and the
+ * bed is settled again (log line), then saved with this build's fingerprint. */
+static int other_code_refused(void)
+{
+    char path[] = "/tmp/dem_bed_code_XXXXXX", logp[] = "/tmp/dem_bed_log_XXXXXX";
+    int fd = mkstemp(path), lfd = mkstemp(logp);
+    ENSURE(fd >= 0 && lfd >= 0);
+    close(fd);
+    unlink(path);
+    dem_bed_params p = small_bed(200);
+    p.settle_min_time = 0.02;
+    p.settle_ke = 1e-6;
+    snprintf(p.file, sizeof p.file, "%s", path);
+    cm_error err = {0};
+    bool loaded;
+    dem_world *a = bed_world(200, 1);
+    ENSURE_MSG(dem_bed_build(a, &p, NULL, NULL, &loaded, &err) == 0 && !loaded, "%s", err.msg);
+    /* overwrite the stored fingerprint as another build would have written it */
+    hid_t f = H5Fopen(path, H5F_ACC_RDWR, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    char good[64] = "";
+    {
+        hid_t at = H5Aopen(f, "code_fingerprint", H5P_DEFAULT);
+        ENSURE(at >= 0);
+        hid_t t = H5Aget_type(at);
+        ENSURE(H5Tget_size(t) == 17);
+        ENSURE(H5Aread(at, t, good) >= 0);
+        const char *other = "0123456789abcdef";
+        ENSURE(strcmp(good, other) != 0);
+        ENSURE(H5Awrite(at, t, other) >= 0);
+        H5Tclose(t);
+        H5Aclose(at);
+    }
+    ENSURE(H5Fclose(f) >= 0);
+    dem_world *c = bed_world(200, 1);
+    ENSURE(dem_bed_load(c, &p, path, &err) == CM_ERR_STATE);
+    ENSURE_MSG(strstr(err.msg, "settled by other code") && strstr(err.msg, "0123456789abcdef") &&
+                   strstr(err.msg, good), "%s", err.msg);
+    ENSURE(dem_grain_count(c) == 0);
+    /* the build settles again and says why on its log (stdout) */
+    fflush(stdout);
+    int saved = dup(1);
+    ENSURE(saved >= 0 && dup2(lfd, 1) == 1);
+    dem_world *d = bed_world(200, 1);
+    int rc = dem_bed_build(d, &p, NULL, NULL, &loaded, &err);
+    fflush(stdout);
+    dup2(saved, 1);
+    close(saved);
+    ENSURE_MSG(rc == 0 && !loaded, "%s", err.msg);
+    ENSURE(dem_world_hash(d) == dem_world_hash(a));
+    char logbuf[4096] = "";
+    FILE *lf = fopen(logp, "r");
+    ENSURE(lf);
+    size_t got = fread(logbuf, 1, sizeof logbuf - 1, lf);
+    fclose(lf);
+    logbuf[got] = '\0';
+    ENSURE_MSG(strstr(logbuf, "settled by other code") && strstr(logbuf, "settling the bed again"), "log: %s", logbuf);
+    /* rewritten with this build's fingerprint: served again */
+    dem_world *e = bed_world(200, 1);
+    ENSURE_MSG(dem_bed_build(e, &p, NULL, NULL, &loaded, &err) == 0 && loaded, "%s", err.msg);
+    dem_world_destroy(&a);
+    dem_world_destroy(&c);
+    dem_world_destroy(&d);
+    dem_world_destroy(&e);
+    unlink(path);
+    unlink(logp);
+    close(lfd);
+    return 0;
+}
+
 /* Output writes grains.h5, grains.xmf and series.csv. */
 static int output_files(void)
 {
@@ -254,6 +363,8 @@ static int config_read(void)
 
 static const test_case tests[] = {
     {"settled_bed", settled_bed}, {"determinism", determinism}, {"bed_cache", bed_cache},
+    {"settled_equals_cached", settled_equals_cached},
+    {"other_code_refused", other_code_refused},
     {"output_files", output_files}, {"config_read", config_read},
 };
 

@@ -1,0 +1,146 @@
+#!/usr/bin/python3
+"""Ensemble statistics over runs of one scene on independently settled beds
+(./run SCENE --seeds N): the one place of this analysis.
+
+Each run's summary.json (fem_server/fem_summary.c) gives per quantity the
+mean over its steady part and the 95 % half-width of that mean from the
+run's own time scatter. Over N runs (seeds):
+
+* ensemble mean m = average of the run means;
+* its 95 % interval t_{N-1} s / sqrt(N), s the standard deviation of the run
+  means. The run means scatter by the bed-to-bed differences AND by each
+  run's finite averaging, so s (and the interval) includes both;
+* the within-run part: the rms of the runs' own standard errors
+  (half_width / 1.96), w; the bed-to-bed part: b^2 = max(s^2 - w^2, 0).
+  Whichever is larger dominates;
+* seeds for a target half-width h: N >= (t s / h)^2 (t of the needed N,
+  iterated); if the within-run part dominates, longer travel helps more than
+  seeds.
+
+usage: ensemble.py RUN_DIR... [--target Q=H ...] [--json OUT]
+   e.g. ensemble.py out/default/seed1 out/default/seed2 out/default/seed3 --target T_P_per_W=0.02
+"""
+import argparse
+import json
+import math
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import numpy as np  # noqa: E402
+
+REPORTED = ("T_H", "T_R", "T_P", "load", "sinkage", "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R")
+
+
+def t95(dof):
+    """Two-sided 95 % Student t quantile (the table of fem_server/steady.c, one source for both)."""
+    table = (math.inf, 12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228,
+             2.201, 2.179, 2.160, 2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086,
+             2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042)
+    if dof < 1:
+        return math.inf
+    return table[dof] if dof <= 30 else 1.960 + 2.4 / dof
+
+
+def seeds_needed(sd, target, start=2):
+    """Smallest N with t_{N-1} sd / sqrt(N) <= target (None if sd or target unusable)."""
+    if not (sd >= 0 and target > 0):
+        return None
+    if sd == 0:
+        return 2
+    n = max(2, start)
+    while n < 100000:
+        if t95(n - 1) * sd / math.sqrt(n) <= target:
+            return n
+        n += 1
+    return None
+
+
+def ensemble(means, half_widths):
+    """Statistics of one quantity over runs: means[i] and half_widths[i] (95 %) of run i."""
+    x = np.asarray(means, dtype=float)
+    h = np.asarray(half_widths, dtype=float)
+    n = len(x)
+    out = {"runs": n, "mean": float(x.mean()) if n else math.nan}
+    if n < 2:
+        out.update(half_width=math.inf, sd_between_runs=math.nan, within_run_se=math.nan, bed_to_bed_sd=math.nan,
+                   dominant="unknown (one run)")
+        return out
+    s = float(x.std(ddof=1))
+    w = float(np.sqrt(np.mean((h / 1.96) ** 2)))
+    b = math.sqrt(max(s * s - w * w, 0.0))
+    out.update(half_width=t95(n - 1) * s / math.sqrt(n), sd_between_runs=s, within_run_se=w, bed_to_bed_sd=b,
+               dominant="bed-to-bed scatter" if b >= w else "within-run time scatter")
+    return out
+
+
+def iid_interval(values):
+    """(mean, 95 % half-width) of independent samples (e.g. sparse snapshots)."""
+    e = ensemble(values, [0.0] * len(values))
+    return e["mean"], e["half_width"]
+
+
+def analyse(summaries, targets=None):
+    """{quantity: ensemble stats} over the runs' summaries (dicts of summary.json)."""
+    targets = targets or {}
+    res = {}
+    for q in REPORTED:
+        rows = [s["quantities"][q] for s in summaries if s.get("travelled") and q in s.get("quantities", {})]
+        if not rows:
+            continue
+        e = ensemble([r["mean"] for r in rows], [r["half_width"] for r in rows])
+        e["unit"] = rows[0].get("unit", "")
+        if q in targets:
+            e["target_half_width"] = targets[q]
+            e["seeds_needed"] = seeds_needed(e["sd_between_runs"], targets[q]) if e["runs"] >= 2 else None
+        res[q] = e
+    return res
+
+
+def load_summaries(dirs):
+    out = []
+    for d in dirs:
+        p = os.path.join(d, "summary.json")
+        if not os.path.exists(p):
+            raise SystemExit("ensemble: %s has no summary.json (the run failed or is still running)" % d)
+        with open(p) as f:
+            out.append(json.load(f))
+    return out
+
+
+def report(res, out=sys.stdout):
+    out.write("ensemble over %d runs (independently settled beds); 95 %% intervals include the bed-to-bed "
+              "scatter:\n" % max([e["runs"] for e in res.values()] or [0]))
+    for q, e in res.items():
+        line = "  %-14s %12.5g %-2s +- %-10.3g (bed-to-bed sd %.3g, within-run se %.3g: %s dominates)" % (
+            q, e["mean"], e["unit"] if e["unit"] != "1" else "", e["half_width"], e["bed_to_bed_sd"],
+            e["within_run_se"], e["dominant"])
+        if "target_half_width" in e:
+            line += "; +-%g needs %s seeds" % (e["target_half_width"], e["seeds_needed"])
+        out.write(line + "\n")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", nargs="+")
+    ap.add_argument("--target", action="append", default=[], help="QUANTITY=HALF_WIDTH, e.g. T_P_per_W=0.02")
+    ap.add_argument("--json", help="write the result here")
+    a = ap.parse_args(argv)
+    targets = {}
+    for t in a.target:
+        k, _, v = t.partition("=")
+        try:
+            targets[k] = float(v)
+        except ValueError:
+            ap.error("--target %s: expected QUANTITY=NUMBER" % t)
+    res = analyse(load_summaries(a.runs), targets)
+    report(res)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"runs": a.runs, "quantities": res}, f, indent=1, default=str)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

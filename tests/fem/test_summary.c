@@ -1,0 +1,229 @@
+/* Steady-state statistics (fem_server/steady.c) and the run summary
+ * (fem_server/fem_summary.c) on synthetic signals of known mean, known
+ * correlation time and known transients: the intervals must cover the true
+ * mean at the stated rate, transients must be excluded, the lug-periodic
+ * signal recovered, the load checked against its target. */
+#include <hdf5.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "drive.h"
+#include "fem_summary.h"
+#include "h5io.h"
+#include "steady.h"
+#include "test.h"
+
+static double gauss(uint64_t *s)
+{
+    /* Box-Muller on splitmix64 draws */
+    double u[2];
+    for (int k = 0; k < 2; k++) {
+        uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+        z ^= z >> 31;
+        u[k] = ((double)(z >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+    }
+    return sqrt(-2.0 * log(u[0])) * cos(2.0 * M_PI * u[1]);
+}
+
+/* AR(1) x_i = phi x_{i-1} + e_i: tau = (1 + phi) / (1 - phi) exactly. */
+static int iat_of_ar1(void)
+{
+    enum { N = 200000 };
+    double *x = malloc(N * sizeof *x);
+    ENSURE(x);
+    uint64_t s = 11;
+    const double phis[] = {0.0, 0.5, 0.9, 0.98};
+    for (size_t k = 0; k < sizeof phis / sizeof *phis; k++) {
+        double phi = phis[k], e = 0;
+        for (int i = 0; i < N; i++)
+            x[i] = e = phi * e + gauss(&s);
+        double tau = steady_iat(x, N), want = (1 + phi) / (1 - phi);
+        printf("  phi %.2f: tau %.2f (exact %.2f)\n", phi, tau, want);
+        /* statistical error of the estimate ~ sqrt(2 (2 M + 1) / N) tau, M ~ 5 tau */
+        ENSURE_REL(tau, want, phi < 0.95 ? 0.2 : 0.25);
+    }
+    /* constant: 1 */
+    for (int i = 0; i < 1000; i++)
+        x[i] = 3.25;
+    ENSURE(steady_iat(x, 1000) == 1.0);
+    free(x);
+    return 0;
+}
+
+/* A strongly correlated signal (tau = 99 samples, like the lug and heave
+ * swings): 20 fixed batches of a 3000-sample series would be 150 samples
+ * each, barely longer than tau, and cover the mean ~80 % of the time; the
+ * batches of 5 tau cover it at the stated 95 % (binomial 3 sd: >= 91 %). */
+static int coverage_correlated(void)
+{
+    enum { N = 3000, RUNS = 400 };
+    static double x[N];
+    uint64_t s = 5;
+    int covered = 0, rough = 0;
+    for (int r = 0; r < RUNS; r++) {
+        double e = 0;
+        for (int i = 0; i < 400; i++) /* start in the stationary state */
+            e = 0.98 * e + gauss(&s);
+        for (int i = 0; i < N; i++)
+            x[i] = 7.0 + (e = 0.98 * e + gauss(&s));
+        steady_stats st;
+        steady_summary(x, N, 0, &st);
+        covered += fabs(st.mean - 7.0) <= st.half_width;
+        rough += st.short_series;
+    }
+    printf("  interval covered the true mean in %d of %d runs (%d rough)\n", covered, RUNS, rough);
+    ENSURE(covered >= 0.91 * RUNS);
+    ENSURE(covered <= 0.995 * RUNS); /* not absurdly wide either */
+    return 0;
+}
+
+/* Whole lug periods: a signal sin(lugs * angle) averages to zero exactly
+ * over whole periods; over the raw window (ending mid-period) it does not. */
+static int lug_window_and_profile(void)
+{
+    enum { N = 1500, BINS = 24 };
+    static double a[N], x[N];
+    double period = 2 * M_PI / 16;
+    for (int i = 0; i < N; i++) {
+        a[i] = -0.0013 * i; /* the wheel turns in the negative sense: |angle| counts */
+        x[i] = 10.0 + 3.0 * sin(2 * M_PI * fabs(a[i]) / period);
+    }
+    size_t end = steady_lug_window(a, N, 100, period);
+    double turned = fabs(a[end] - a[100]);
+    ENSURE_NEAR(fmod(turned, period), 0.0, 0.0014);
+    ENSURE(fabs(a[N - 1] - a[100]) - turned < period);
+    steady_stats whole, raw;
+    steady_summary(x, end, 100, &whole);
+    steady_summary(x, N, 100, &raw);
+    ENSURE_NEAR(whole.mean, 10.0, 0.01);
+    ENSURE(fabs(raw.mean - 10.0) > 0.1); /* 3.4 periods: the part period biases the mean */
+    double pm[BINS];
+    int pc[BINS];
+    steady_profile(x, a, 100, end, period, BINS, pm, pc);
+    for (int b = 0; b < BINS; b++) {
+        double ph0 = fabs(a[100]) / period, phase = (b + 0.5) / BINS + ph0;
+        ENSURE(pc[b] > 0);
+        ENSURE_NEAR(pm[b], 10.0 + 3.0 * sin(2 * M_PI * phase), 0.45); /* bin width 1/24 of a period */
+    }
+    /* less than one period turned: the whole stretch */
+    ENSURE(steady_lug_window(a, 40, 0, period) == 40);
+    return 0;
+}
+
+/* A run's series written as fem_server writes it, with known answers:
+ * T_P steady from the start, the sinkage in a transient for the first 30 %
+ * of the travel, the load low (position control). The summary's steady part
+ * excludes the sinkage transient, its means cover the true ones, the
+ * coefficient is per actual load, the load warning names position control. */
+static int summary_of_synthetic_run(void)
+{
+    char dir[] = "/tmp/fem_summary_XXXXXX";
+    ENSURE(mkdtemp(dir));
+    char path[256];
+    snprintf(path, sizeof path, "%s/wheel.h5", dir);
+    static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My",
+                                       "Fx"};
+    cm_error err = {0};
+    cm_h5 *h5 = NULL;
+    cm_h5_series *ser = NULL;
+    cm_h5_def def = cm_h5_default_def();
+    ENSURE_MSG(cm_h5_create(path, &def, &h5, &err) == 0, "%s", err.msg);
+    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 12, NULL, &ser, &err) == 0, "%s", err.msg);
+    enum { SINK = 500, N = 20000 };
+    const double dt = 1e-4, v = 0.5, R = 0.3, W_true = 150.0, TP_true = -12.0, S_true = 0.04;
+    uint64_t s = 99;
+    double e1 = 0, e2 = 0, e3 = 0;
+    for (int i = 0; i < SINK + N; i++) {
+        int travel = i >= SINK;
+        double tt = travel ? (i - SINK) * dt : 0;
+        e1 = 0.95 * e1 + gauss(&s), e2 = 0.95 * e2 + gauss(&s), e3 = 0.9 * e3 + gauss(&s);
+        double sink = S_true - (travel ? 0.015 * exp(-tt / 0.1) : 0.02) + 1e-4 * e3;
+        double load = W_true + 5.0 * e1, tp = TP_true + 2.0 * e2;
+        double row[12] = {i * dt, travel ? DRIVE_TRAVEL : DRIVE_SINK, v * tt, -v * tt / (R * 0.9), load,
+                          30 + tp / 2, -30 + tp / 2, tp, sink, 0.1, -R * (30 + tp / 2), tp};
+        ENSURE_MSG(cm_h5_series_append(ser, row, &err) == 0, "%s", err.msg);
+    }
+    ENSURE(cm_h5_close(&h5, &err) == 0);
+    fem_summary_def d = {.out_dir = dir, .scene = "synthetic", .control = DRIVE_CONTROL_SLIP,
+                         .motion = DRIVE_SINK_TRAVEL, .target_load = 400.0, .radius = R,
+                         .lug_period = 2 * M_PI / 16, .interval = dt, .slip = 0.1};
+    int rc = fem_summary_write(&d, &err);
+    ENSURE_MSG(rc == FEM_SUMMARY_LOAD_OFF, "rc %d: %s", rc, err.msg);
+    /* read it back */
+    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    double q[13][8], t_start = 0;
+    hid_t ds = H5Dopen2(f, "/summary/quantities", H5P_DEFAULT);
+    ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, q) >= 0);
+    H5Dclose(ds);
+    double conv[4][11];
+    ds = H5Dopen2(f, "/summary/convergence", H5P_DEFAULT);
+    ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, conv) >= 0);
+    H5Dclose(ds);
+    hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
+    hid_t at = H5Aopen(g, "steady_start_time", H5P_DEFAULT);
+    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &t_start) >= 0);
+    H5Aclose(at);
+    char warn[600] = "";
+    at = H5Aopen(g, "load_warning", H5P_DEFAULT);
+    hid_t ty = H5Aget_type(at);
+    ENSURE(H5Tget_size(ty) < sizeof warn && H5Aread(at, ty, warn) >= 0);
+    H5Tclose(ty);
+    H5Aclose(at);
+    H5Gclose(g);
+    H5Fclose(f);
+    printf("  steady from t = %.3f s; T_P %.3f +- %.3f, load %.2f +- %.2f, sinkage %.5f +- %.5f, T_P/W %.5f +- %.5f\n",
+           t_start, q[2][0], q[2][1], q[3][0], q[3][1], q[4][0], q[4][1], q[8][0], q[8][1]);
+    /* the sinkage transient (0.015 m e^{-t/0.1}) is out: < 1e-4 m left after 0.5 s of it */
+    ENSURE(t_start - SINK * dt > 0.25);
+    ENSURE(fabs(q[4][0] - S_true) <= q[4][1] + 2e-5);
+    ENSURE(fabs(q[2][0] - TP_true) <= q[2][1]);
+    ENSURE(fabs(q[3][0] - W_true) <= q[3][1]);
+    ENSURE_NEAR(q[8][0], q[2][0] / q[3][0], 1e-12);    /* per actual load */
+    ENSURE(fabs(q[8][0] - TP_true / W_true) <= q[8][1]);
+    ENSURE_NEAR(q[9][0], q[4][0] / R, 1e-12);          /* sinkage / R */
+    ENSURE_NEAR(q[10][0], q[0][0], 1e-9);              /* T_H from the axle torque, -M_y / R */
+    ENSURE_NEAR(q[11][0], q[2][0], 1e-12);             /* Fx, here = T_P */
+    ENSURE_NEAR(q[12][0], -R * q[0][0], 1e-9);         /* My */
+    ENSURE(q[2][5] > 0.5 * 39 * dt && q[2][5] < 2 * 39 * dt); /* tau of AR(0.95) = 39 samples */
+    ENSURE_MSG(strstr(warn, "sink_travel") && strstr(warn, "150"), "%s", warn);
+    /* convergence with travel: the full stretch is the summary's; the
+     * half-width of T_P shrinks about as 1/sqrt(travel) (x 1/2 from a
+     * quarter to all, within the intervals' own scatter) */
+    ENSURE_NEAR(conv[3][5], q[2][0], 1e-12);
+    ENSURE_NEAR(conv[3][6], q[2][1], 1e-12);
+    ENSURE(conv[0][0] > 0.2 * conv[3][0] && conv[0][0] < 0.3 * conv[3][0]);
+    ENSURE_MSG(conv[3][6] / conv[0][6] > 0.3 && conv[3][6] / conv[0][6] < 0.75, "quarter %g, all %g", conv[0][6],
+               conv[3][6]);
+    /* summary.json beside it says the same */
+    char jpath[256], buf[8192];
+    snprintf(jpath, sizeof jpath, "%s/summary.json", dir);
+    FILE *jf = fopen(jpath, "r");
+    ENSURE(jf);
+    size_t got = fread(buf, 1, sizeof buf - 1, jf);
+    fclose(jf);
+    buf[got] = '\0';
+    ENSURE(strstr(buf, "\"T_P_per_W\"") && strstr(buf, "\"warnings\": [\"the steady load is 150"));
+    /* on target: no warning */
+    d.target_load = 150.0;
+    ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
+    snprintf(buf, sizeof buf, "rm -rf %s", dir);
+    ENSURE(system(buf) == 0);
+    return 0;
+}
+
+static const test_case tests[] = {
+    {"iat_of_ar1", iat_of_ar1},
+    {"coverage_correlated", coverage_correlated},
+    {"lug_window_and_profile", lug_window_and_profile},
+    {"summary_of_synthetic_run", summary_of_synthetic_run},
+};
+
+int main(int argc, char **argv)
+{
+    cm_h5_library_init();
+    return test_main(argc, argv, tests, TEST_COUNT(tests));
+}

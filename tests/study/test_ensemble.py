@@ -1,0 +1,112 @@
+#!/usr/bin/python3
+"""Ensembles over beds (bench/post/ensemble.py, ./run --seeds): on generated
+summaries of known mean, bed-to-bed scatter and within-run scatter, the
+ensemble interval covers the true mean at its stated 95 %, the dominant
+scatter is named, the seeds needed for a target are right; ./run refuses
+bad --seeds arguments.
+
+usage: test_ensemble.py CASE [BUILD_DIR]   (ctest runs one case per entry)"""
+import json
+import math
+import os
+import random
+import subprocess
+import sys
+import tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, os.path.join(ROOT, "bench", "post"))
+
+import ensemble  # noqa: E402
+
+
+def ensure(cond, what):
+    if not cond:
+        raise AssertionError(what)
+
+
+def summary(mean, half_width):
+    return {"travelled": True, "quantities": {"T_P_per_W": {"unit": "1", "mean": mean, "half_width": half_width}}}
+
+
+def draw(rng, n, mu, sd_bed, se_run):
+    """n runs: run mean = mu + bed effect + the run's own averaging error."""
+    return [summary(mu + rng.gauss(0, sd_bed) + rng.gauss(0, se_run), 1.96 * se_run) for _ in range(n)]
+
+
+def coverage_known_mean():
+    rng = random.Random(4)
+    mu = -0.08
+    for n, sd_bed, se_run in ((3, 0.03, 0.005), (5, 0.01, 0.01), (8, 0.002, 0.02)):
+        draws, covered = 4000, 0
+        for _ in range(draws):
+            e = ensemble.analyse(draw(rng, n, mu, sd_bed, se_run))["T_P_per_W"]
+            covered += abs(e["mean"] - mu) <= e["half_width"]
+        rate = covered / draws
+        print("  %d seeds, bed sd %g, run se %g: covered %.3f" % (n, sd_bed, se_run, rate))
+        # binomial sd at 4000 draws: 0.0034; 3 sd either side of 0.95
+        ensure(0.94 <= rate <= 0.96, (n, rate))
+
+
+def dominant_named():
+    rng = random.Random(9)
+    e = ensemble.analyse(draw(rng, 40, 0.0, 0.05, 0.002))["T_P_per_W"]
+    ensure(e["dominant"] == "bed-to-bed scatter", e)
+    ensure(abs(e["bed_to_bed_sd"] - 0.05) < 0.015, e)
+    ensure(abs(e["within_run_se"] - 0.002) < 1e-12, e)
+    e = ensemble.analyse(draw(rng, 40, 0.0, 0.001, 0.03))["T_P_per_W"]
+    ensure(e["dominant"] == "within-run time scatter", e)
+
+
+def seeds_for_target():
+    # t_{N-1} s / sqrt(N) <= h, smallest N, against brute force
+    for s, h in ((0.05, 0.02), (0.05, 0.005), (0.01, 0.02), (0.1, 0.03)):
+        n = ensemble.seeds_needed(s, h)
+        ok = [m for m in range(2, 10000) if ensemble.t95(m - 1) * s / math.sqrt(m) <= h]
+        ensure(n == ok[0], (s, h, n, ok[:3]))
+    ensure(ensemble.seeds_needed(0.05, 0.02) == 27, ensemble.seeds_needed(0.05, 0.02))
+    res = ensemble.analyse(draw(random.Random(1), 4, 0.0, 0.05, 0.001), {"T_P_per_W": 0.02})
+    ensure(res["T_P_per_W"]["seeds_needed"] == ensemble.seeds_needed(res["T_P_per_W"]["sd_between_runs"], 0.02),
+           res)
+
+
+def reads_summaries_from_runs():
+    # run folders with summary.json as fem_server writes them: the command line works on them
+    tmp = tempfile.mkdtemp()
+    dirs = []
+    for k, m in enumerate((1.0, 2.0, 3.0)):
+        d = os.path.join(tmp, "seed%d" % (k + 1))
+        os.makedirs(d)
+        with open(os.path.join(d, "summary.json"), "w") as f:
+            json.dump(summary(m, 0.1), f)
+        dirs.append(d)
+    out = os.path.join(tmp, "ens.json")
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "post", "ensemble.py")] + dirs +
+                       ["--json", out, "--target", "T_P_per_W=0.5"], capture_output=True, text=True)
+    ensure(p.returncode == 0, p.stderr)
+    r = json.load(open(out))["quantities"]["T_P_per_W"]
+    ensure(abs(r["mean"] - 2.0) < 1e-12 and abs(r["half_width"] - 4.303 * 1.0 / math.sqrt(3)) < 1e-9, r)
+    ensure("seeds" in p.stdout and "dominates" in p.stdout, p.stdout)
+    # a run without its summary is named
+    os.remove(os.path.join(dirs[1], "summary.json"))
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "post", "ensemble.py")] + dirs,
+                       capture_output=True, text=True)
+    ensure(p.returncode != 0 and dirs[1] in p.stderr, p.stderr)
+
+
+def launcher_refuses_bad_seeds():
+    env = dict(os.environ, DEMFEM_NO_BUILD="1")
+    scene = os.path.join(ROOT, "tests", "coupling", "scenes", "tire_small.cfg")
+    for args, what in ((["--seeds", "0"], "--seeds needs a number"), (["--seeds", "x"], "--seeds needs a number"),
+                       (["--seeds", "2", "--resume", "/tmp"], "cannot be combined")):
+        p = subprocess.run([os.path.join(ROOT, "run"), scene] + args, capture_output=True, text=True, env=env)
+        ensure(p.returncode == 2 and what in p.stderr, (args, p.returncode, p.stderr))
+
+
+CASES = {f.__name__: f for f in (coverage_known_mean, dominant_named, seeds_for_target, reads_summaries_from_runs,
+                                 launcher_refuses_bad_seeds)}
+
+if __name__ == "__main__":
+    CASES[sys.argv[1]]()
+    print("ok   %s" % sys.argv[1])

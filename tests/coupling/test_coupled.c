@@ -37,7 +37,13 @@ static int start(launch *l, const char *scene, const char *tag, const char *cons
     snprintf(l->out, sizeof l->out, "/tmp/demfem-coupled-%d-%s", (int)getpid(), tag);
     char log[300];
     snprintf(log, sizeof log, "%s.log", l->out);
-    mkdir(l->out, 0755);
+    /* an empty folder: pids are recycled, and what an earlier run with this
+     * name left (a plate_peer.running, a traction.csv) must not be read as
+     * this run's */
+    char rm[400];
+    snprintf(rm, sizeof rm, "rm -rf '%s'", l->out);
+    if (system(rm) != 0 || mkdir(l->out, 0755) != 0)
+        return errno ? errno : -1;
     const char *argv[32] = {DEMFEM_SOURCE_DIR "/run", scene, "--out", l->out};
     int n = 4;
     for (int i = 0; extra && extra[i] && n < 31; i++)
@@ -303,7 +309,10 @@ static int tire_from_gmsh_runs(void)
     double v[3];
     ENSURE(last_row(l.out, cols, v, 3, NULL) > 1000);
     printf("  sinkage %.2f mm, interface work DEM %.4g J, FEM %.4g J\n", 1e3 * v[0], v[1], v[2]);
-    ENSURE(v[0] > 0.004 && v[0] < 0.009); /* tire_small_runs sinks 6.4 mm */
+    /* tire_small sinks 3.3, 6.6, 11.6 and 6.8 mm on the beds of seeds 1-4 (the
+     * depth where the load first reaches 60 N jumps with single grains): a
+     * sane sinkage, not one bed's */
+    ENSURE(v[0] > 0.002 && v[0] < 0.02);
     ENSURE_REL(v[2], v[1], 0.05);
     ENSURE(shm_clean(&l));
     return 0;
@@ -333,7 +342,10 @@ static int tire_exchange_every_two(void)
     double v[3];
     ENSURE(last_row(l.out, cols, v, 3, NULL) > 1000);
     printf("  sinkage %.2f mm, interface work DEM %.4g J, FEM %.4g J\n", 1e3 * v[0], v[1], v[2]);
-    ENSURE(v[0] > 0.004 && v[0] < 0.009); /* tire_small_runs sinks 6.4 mm */
+    /* tire_small sinks 3.3, 6.6, 11.6 and 6.8 mm on the beds of seeds 1-4 (the
+     * depth where the load first reaches 60 N jumps with single grains): a
+     * sane sinkage, not one bed's */
+    ENSURE(v[0] > 0.002 && v[0] < 0.02);
     ENSURE_REL(v[2], v[1], 0.05);
     ENSURE(shm_clean(&l));
     return 0;

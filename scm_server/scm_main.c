@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -248,10 +249,14 @@ static int run(const options *o)
         cm_log_info("coupled run finished: %ld exchanges, t = %.4f s in %.1f s; waited for the FEM %.1f s; "
                     "interface work seen by the terrain %.6g J",
                     n, time, wall, is.wait_recv_s + is.wait_send_s, w_dem);
+        struct rusage ru;
+        getrusage(RUSAGE_SELF, &ru);
         cm_log_info("profile: raster %.2f s, soil %.2f s, shear %.2f s, exchange %.2f s, output %.2f s "
-                    "(%ld steps, %.1f us/step of terrain)",
+                    "(%ld steps, %.1f us/step of terrain); CPU time of scm_server %.2f s",
                     pr.raster, pr.soil, pr.shear, t_exchange, t_output, pr.steps,
-                    pr.steps ? 1e6 * (pr.raster + pr.soil + pr.shear) / pr.steps : 0.0);
+                    pr.steps ? 1e6 * (pr.raster + pr.soil + pr.shear) / pr.steps : 0.0,
+                    (double)ru.ru_utime.tv_sec + 1e-6 * (double)ru.ru_utime.tv_usec + (double)ru.ru_stime.tv_sec +
+                        1e-6 * (double)ru.ru_stime.tv_usec);
     }
     if (o->out && (rc = write_rut(o->out, t, &cfg.grid, &err)))
         goto fail;

@@ -56,7 +56,7 @@ static int write_scene(run_files *f, const char *tag, double end_time)
         return -1;
     fprintf(s,
             "run = { end_time = %.9g; progress_every = 0.0; };\n"
-            "coupling = { dt = %g; connect_timeout = 30.0; };\n"
+            "coupling = { dt = %g; connect_timeout = 30.0; stall_timeout = 30.0; };\n"
             "wheel = { radius = 0.3; };   # the FEM side's: skipped\n"
             "scm = { surface_height = %g; grid = { min = [-0.2, -0.2]; max = [0.2, 0.2]; cell = 0.005; }; };\n",
             end_time, dt, h0);
@@ -123,6 +123,9 @@ static int fem_side(const run_files *f, int notify_fd)
     def.n_tris = 2;
     def.exchange_dt = dt;
     def.connect_timeout = 30;
+    /* a loaded machine may not schedule a heartbeat for a second: a killed
+     * peer is still noticed at once, by its pid */
+    def.stall_timeout = 30;
     ipc_channel *ch;
     char msg[512];
     if (ipc_create(f->shm, &def, &ch, msg, sizeof msg)) {

@@ -7,6 +7,10 @@
  *                           naming the dead peer, and /dev/shm holds nothing
  *   scm_killed              scm_server is SIGKILLed mid-run: the FEM side notices a dead peer
  *                           within 3 s; /dev/shm holds nothing
+ *   tire_small_on_scm       ./run SCENE --terrain scm with the real fem_server (small tire, its
+ *                           lightest surface nodes exchanged explicitly every 1e-5 s): it ends
+ *                           cleanly, fem_server's check of the nodal forces against the totals
+ *                           holds to round-off, both sides see the same interface work
  * Processes are stopped by the pid this test started; the moment to kill is
  * signalled by the FEM side through a pipe after 20 exchanges. */
 #include <errno.h>
@@ -24,8 +28,8 @@
 #include "ipc.h"
 #include "test.h"
 
-#ifndef SCM_SERVER_PATH
-#error "SCM_SERVER_PATH must be defined"
+#if !defined(SCM_SERVER_PATH) || !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR)
+#error "SCM_SERVER_PATH, DEMFEM_SOURCE_DIR and DEMFEM_BUILD_DIR must be defined"
 #endif
 
 extern char **environ;
@@ -287,7 +291,79 @@ static int scm_killed(void)
     return 0;
 }
 
+/* Values of the named columns in the last row of DIR/traction.csv. */
+static int last_row(const char *dir, const char *const *cols, double *vals, int n)
+{
+    char path[400], line[8192], header[8192];
+    snprintf(path, sizeof path, "%s/traction.csv", dir);
+    FILE *f = fopen(path, "r");
+    if (!f || !fgets(header, sizeof header, f)) {
+        if (f)
+            fclose(f);
+        return -1;
+    }
+    int idx[8], col = 0, rows = 0;
+    for (int k = 0; k < n; k++)
+        idx[k] = -1;
+    for (char *tok = strtok(header, ",\n"); tok; tok = strtok(NULL, ",\n"), col++)
+        for (int k = 0; k < n; k++)
+            if (strcmp(tok, cols[k]) == 0)
+                idx[k] = col;
+    while (fgets(line, sizeof line, f)) {
+        rows++;
+        col = 0;
+        for (char *tok = strtok(line, ","); tok; tok = strtok(NULL, ","), col++)
+            for (int k = 0; k < n; k++)
+                if (col == idx[k])
+                    vals[k] = strtod(tok, NULL);
+    }
+    fclose(f);
+    for (int k = 0; k < n; k++)
+        if (idx[k] < 0)
+            return -1;
+    return rows;
+}
+
+static int tire_small_on_scm(void)
+{
+    char out[180], log[200], cmd[1200];
+    snprintf(out, sizeof out, "/tmp/scm-peer-%d-tire", (int)getpid());
+    snprintf(log, sizeof log, "%s.log", out);
+    snprintf(cmd, sizeof cmd,
+             "DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=%s %s/run %s/tests/scm/scenes/tire_small_scm.cfg --terrain scm "
+             "--out %s > %s 2>&1",
+             DEMFEM_BUILD_DIR, DEMFEM_SOURCE_DIR, DEMFEM_SOURCE_DIR, out, log);
+    int rc = system(cmd);
+    run_files f;
+    snprintf(f.log, sizeof f.log, "%s", log);
+    const char *text = read_log(&f);
+    if (rc != 0)
+        fprintf(stderr, "---- %s ----\n%s----\n", log, text);
+    ENSURE(rc == 0);
+    double df = 1, dm = 1;
+    const char *p = strstr(text, "conservation: nodal forces vs contact totals differ by at most ");
+    ENSURE(p && sscanf(p, "conservation: nodal forces vs contact totals differ by at most %lf (force) and %lf", &df,
+                       &dm) == 2);
+    static const char *const cols[] = {"W_dem", "W_fem", "sinkage", "Fz"};
+    double v[4] = {0, 0, 0, 0};
+    ENSURE(last_row(out, cols, v, 4) > 1000);
+    printf("  nodal forces against the totals: %.1e (force), %.1e (moment); interface work: terrain %.5g J, FEM "
+           "%.5g J; sinkage %.2f mm, load %.1f N\n",
+           df, dm, v[0], v[1], 1e3 * v[2], v[3]);
+    ENSURE_MSG(df < 1e-12 && dm < 1e-12, "force %g, moment %g", df, dm);
+    ENSURE(v[0] < 0);              /* the tire works on the soil */
+    ENSURE_REL(v[1], v[0], 0.05);  /* both sides see the same work */
+    ENSURE(v[2] > 0.001 && v[2] < 0.08);
+    const char *shm = strstr(text, "(shared memory /");
+    char name[128], path[160];
+    ENSURE(shm && sscanf(shm, "(shared memory %127[^)])", name) == 1);
+    snprintf(path, sizeof path, "/dev/shm%s", name);
+    ENSURE(access(path, F_OK) != 0 && errno == ENOENT);
+    return 0;
+}
+
 static const test_case tests[] = {
+    {"tire_small_on_scm", tire_small_on_scm},
     {"plate_through_protocol", plate_through_protocol},
     {"fem_peer_killed", fem_peer_killed},
     {"scm_killed", scm_killed},

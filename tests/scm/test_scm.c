@@ -320,9 +320,9 @@ typedef struct wheel_run {
     double max_force_err, max_moment_err; /* node forces against totals, relative */
 } wheel_run;
 
-/* Rolls the wheel at sinkage z0 and slip s over 0.45 m of fresh soil; the
- * forces averaged over the last 0.15 m. */
-static int roll_wheel(const scm_soil *s, double R, double b, double z0, double slip, wheel_run *out)
+/* Rolls the wheel at sinkage z0 and slip s over `travel` m of fresh soil;
+ * the forces averaged from 0.3 m on. */
+static int roll_wheel(const scm_soil *s, double R, double b, double z0, double slip, double travel, wheel_run *out)
 {
     /* cell centres at even mm across: the wheel's edges (+-0.075 m) fall between them */
     scm_grid_def g = {.min = {-0.45, -0.121}, .max = {0.75, 0.121}, .cell = 0.002, .height = 0.0};
@@ -330,12 +330,12 @@ static int roll_wheel(const scm_soil *s, double R, double b, double z0, double s
     mesh m;
     ENSURE(scm_terrain_create(&g, s, &t, NULL) == 0);
     ENSURE(wheel_mesh(&m, R, b, 0.0, 720, 8) == 0);
-    const double omega = 2.0, v = omega * R * (1 - slip), ds = 2.5e-4, dt = ds / v, travel = 0.45;
+    const double omega = 2.0, v = omega * R * (1 - slip), ds = 2.5e-4, dt = ds / v;
     double c[3] = {0.0, 0.0, g.height + R - z0};
     wheel_place(&m, c, 0, v, omega);
     ENSURE(scm_terrain_set_surface(t, m.nn, m.x, m.nt, m.tris, NULL) == 0);
     ENSURE_NEAR(scm_terrain_plate_width(t), b, 1e-12);
-    const int steps = (int)(travel / ds + 0.5), avg_from = (int)(0.3 / ds);
+    const int steps = (int)(travel / ds + 0.5), avg_from = travel > 0.3 ? (int)(0.3 / ds) : 0;
     memset(out, 0, sizeof *out);
     int n_avg = 0;
     for (int n = 0; n <= steps; n++) {
@@ -397,7 +397,7 @@ static int wheel_wong_reece(void)
     const double slips[2] = {0.1, 0.3};
     for (int i = 0; i < 2; i++) {
         wheel_run r;
-        if (roll_wheel(&s, R, b, z0, slips[i], &r))
+        if (roll_wheel(&s, R, b, z0, slips[i], 0.45, &r))
             return 1;
         wheel_forces q = wong_reece(&s, b, R, z0, slips[i]);
         double zq = wong_reece_sinkage(&s, b, R, r.sim.W, slips[i]);
@@ -422,7 +422,7 @@ static int node_force_balance(void)
 {
     const scm_soil s = test_soil();
     wheel_run r;
-    if (roll_wheel(&s, 0.3, 0.15, 0.02, 0.2, &r))
+    if (roll_wheel(&s, 0.3, 0.15, 0.02, 0.2, 0.15, &r)) /* balance only: 0.15 m */
         return 1;
     printf("  largest difference of the node forces' resultant from the cells': %.1e of the load; of the "
            "moment: %.1e of load x radius\n",

@@ -4,7 +4,7 @@ against slip, and the wall time per point, for each (terrain, tire) of the
 slip sweeps given (bench/slip_sweep/run's CSVs, which hold the steady means
 and 95 % intervals that fem_server's statistics give).
 
-usage: bench/post/ladder.py OUT.png LABEL=FILE.csv [LABEL=FILE.csv ...]
+usage: bench/post/ladder.py OUT.png [--title TEXT] LABEL=FILE.csv [LABEL=FILE.csv ...]
 
 A CSV without a `tire` column is an elastic-tire sweep. Each LABEL names the
 terrain (e.g. "DEM", "SCM"); the tire is added from the file. Points are
@@ -33,8 +33,12 @@ def main():
     if len(sys.argv) < 3:
         sys.exit(__doc__)
     out = sys.argv[1]
+    args = sys.argv[2:]
+    title = "terrain ladder"
+    if len(args) >= 2 and args[0] == "--title":
+        title, args = args[1], args[2:]
     series = {}
-    for arg in sys.argv[2:]:
+    for arg in args:
         label, path = arg.split("=", 1)
         for r in read(path):
             key = "%s, %s tire" % (label, r.get("tire", "elastic"))
@@ -63,8 +67,7 @@ def main():
         ax.set_xlabel("slip [%]")
     axes.flat[0].axhline(0, color="k", lw=0.5)
     axes.flat[0].legend(fontsize=8)
-    fig.suptitle("default scene, 0.12 m of travel: SCM (Wong's dry sand) against DEM (spheres, uncalibrated)",
-                 fontsize=10)
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     print("wrote", out)

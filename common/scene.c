@@ -354,6 +354,18 @@ void cm_scene_mark_known(cm_scene *s, const char *path)
     }
 }
 
+void cm_scene_skip_foreign(cm_scene *s, const char *const *own)
+{
+    static const char *const all[] = {"run", "coupling", "wheel", "fem", "dem", "scm", NULL};
+    for (int k = 0; all[k]; k++) {
+        int ours = 0;
+        for (int i = 0; own[i]; i++)
+            ours |= strcmp(all[k], own[i]) == 0;
+        if (!ours)
+            cm_scene_mark_known(s, all[k]);
+    }
+}
+
 /* Builds "a.b.[2].c" for st into buf (libconfig's own path syntax). */
 static void setting_path(const config_setting_t *st, char *buf, size_t len)
 {

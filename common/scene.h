@@ -57,6 +57,14 @@ int cm_scene_length(cm_scene *s, const char *path);
  * other server's section). */
 void cm_scene_mark_known(cm_scene *s, const char *path);
 
+/* The top-level sections of the programs that read one scene: `run` and
+ * `coupling` (every program), `wheel` and `fem` (the FEM side, fem_server),
+ * `dem` (dem_server), `scm` (scm_server). A program calls this with its own
+ * NULL-terminated list before cm_scene_check_unknown: the other programs'
+ * sections are then accepted unread, while a top-level name that no program
+ * reads (a typo such as "wheeel") is still refused. */
+void cm_scene_skip_foreign(cm_scene *s, const char *const *own);
+
 /* Fails on the first key below any of the NULL-terminated `sections` that no
  * getter read, and on any top-level section not in `sections`. Call it after
  * all reading is done. */

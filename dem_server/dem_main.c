@@ -345,9 +345,8 @@ static int run(const options *o)
         octx.last_frame = octx.last_series = s0.step;
     }
     /* Every key is read: now a leftover is a typo. */
-    cm_scene_mark_known(scene, "fem");
-    cm_scene_mark_known(scene, "wheel");
     static const char *const sections[] = {"run", "coupling", "dem", NULL};
+    cm_scene_skip_foreign(scene, sections); /* fem, wheel, scm: the other programs' */
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
         goto fail;
     if (dem_grain_count(w) == 0) {

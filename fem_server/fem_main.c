@@ -192,8 +192,8 @@ static int run(const options *o)
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
         (rc = fem_config_read(scene, &cfg, &err)))
         goto fail;
-    cm_scene_mark_known(scene, "dem");
     static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
+    cm_scene_skip_foreign(scene, sections); /* dem, scm: the terrain's */
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
         goto fail;
     /* Resuming, the results files are reopened after the checkpoint is read. */

@@ -45,15 +45,15 @@ typedef struct plate_def {
 
 static int read_plate(cm_scene *s, plate_def *d, cm_error *err)
 {
-    /* strict, as the servers: a misspelt fem.plate key is an error; the dem
-     * section is dem_server's */
-    static const char *const sections[] = {"run", "coupling", "dem", "fem", NULL};
+    /* strict, as the servers: a misspelt fem.plate key is an error; the
+     * terrain's sections are dem_server's (or scm_server's) */
+    static const char *const sections[] = {"run", "coupling", "fem", NULL};
     if (cm_scene_doubles(s, "fem.plate.size", 2, 1e-4, 100, d->size, err) ||
         cm_scene_doubles(s, "fem.plate.center", 2, -1e3, 1e3, d->center, err) ||
         cm_scene_double(s, "fem.plate.start_z", -1e3, 1e3, &d->start_z, err) ||
         cm_scene_double(s, "fem.plate.speed", 1e-6, 10, &d->speed, err))
         return err->code;
-    cm_scene_mark_known(s, "dem");
+    cm_scene_skip_foreign(s, sections);
     return cm_scene_check_unknown(s, sections, err);
 }
 

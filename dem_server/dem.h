@@ -246,11 +246,10 @@ int dem_step(dem_world *w, cm_error *err); /* both */
 
 typedef struct dem_profile {
     /* wall-clock seconds per stage of the step (dem_world.c), summed over the
-     * run; a stage's share is its time over the sum of the five */
+     * run; a stage's share is its time over the sum of the four */
     double rebuild;   /* s, neighbour grid, grain re-sort, pair list, history carry-over */
     double surface;   /* s, gravity, walls and the triangle surface (incl. BVH refit) */
-    double pairs;     /* s, grain–grain narrow phase (each pair's force stored) */
-    double gather;    /* s, per-grain sums of the pair forces in pair order */
+    double pairs;     /* s, grain–grain narrow phase, forces summed into the grains in pair order */
     double integrate; /* s, Verlet, rotation, the moved-grain check */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */

@@ -8,7 +8,7 @@
  *             forces and totals summed; between them the first k - 1
  *             dem_step_grains
  *   send      the interval's mean node forces (eq. 42) and totals posted
- *   grains    the last dem_step_grains (grain pairs, gather, integrate,
+ *   grains    the last dem_step_grains (grain pairs, integrate,
  *             neighbour rebuild): overlaps the FEM's step
  *   wait      the FEM's reply: surface positions and velocities at t + k dt
  *   update    dem_surface_update (BVH refit), the terrain window moved

@@ -202,25 +202,27 @@ static int add_listed_grains(cm_scene *s, const dem_config *cfg, dem_world *w, c
  * count) when there is an output folder. */
 static void report_profile(const dem_profile *p, const dem_coupled_profile *c, const char *dir)
 {
-    const char *names[] = {"rebuild", "surface", "pairs", "gather", "integrate"};
-    const double t[] = {p->rebuild, p->surface, p->pairs, p->gather, p->integrate};
+    const char *names[] = {"rebuild", "surface", "pairs", "integrate"};
+    const double t[] = {p->rebuild, p->surface, p->pairs, p->integrate};
+    const int n_st = (int)(sizeof t / sizeof t[0]);
     const char *cnames[] = {"surface", "send", "grains", "wait", "update", "record"};
     const double ct[] = {c ? c->surface : 0, c ? c->send : 0,   c ? c->grains : 0,
                          c ? c->wait : 0,    c ? c->update : 0, c ? c->record : 0};
+    const int n_cst = (int)(sizeof ct / sizeof ct[0]);
     double tot = 0, ctot = 0;
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < n_st; k++)
         tot += t[k];
-    for (int k = 0; k < 6; k++)
+    for (int k = 0; k < n_cst; k++)
         ctot += ct[k];
     char line[512];
     int len = snprintf(line, sizeof line, "profile of the step (%ld steps, %ld rebuilds):", p->steps, p->rebuilds);
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < n_st; k++)
         len += snprintf(line + len, sizeof line - (size_t)len, " %s %.2f s (%.0f %%)", names[k], t[k],
                         tot > 0 ? 100 * t[k] / tot : 0.0);
     cm_log_info("%s", line);
     if (c) {
         len = snprintf(line, sizeof line, "profile of the exchange (%ld exchanges):", c->exchanges);
-        for (int k = 0; k < 6; k++)
+        for (int k = 0; k < n_cst; k++)
             len += snprintf(line + len, sizeof line - (size_t)len, " %s %.2f s (%.0f %%)", cnames[k], ct[k],
                             ctot > 0 ? 100 * ct[k] / ctot : 0.0);
         cm_log_info("%s", line);
@@ -235,11 +237,11 @@ static void report_profile(const dem_profile *p, const dem_coupled_profile *c, c
         return;
     }
     fprintf(f, "group,stage,seconds,share,count\n");
-    for (int k = 0; k < 5; k++)
+    for (int k = 0; k < n_st; k++)
         fprintf(f, "step,%s,%.6f,%.4f,%ld\n", names[k], t[k], tot > 0 ? t[k] / tot : 0.0,
                 k == 0 ? p->rebuilds : p->steps);
     if (c)
-        for (int k = 0; k < 6; k++)
+        for (int k = 0; k < n_cst; k++)
             fprintf(f, "exchange,%s,%.6f,%.4f,%ld\n", cnames[k], ct[k], ctot > 0 ? ct[k] / ctot : 0.0, c->exchanges);
     if (fclose(f) != 0)
         cm_log_warn("cannot write %s", path);

@@ -30,6 +30,7 @@ typedef struct dem_grains {
     double *tx, *ty, *tz;
     double *r, *inv_m, *inv_i;
     int *mat;
+    void *block;       /* the doubles x .. z0 live in it, staggered (dem_world_create) */
     /* cold */
     double *q;         /* 4 per grain (w, x, y, z) */
     int *id;           /* id of the grain in slot i (dense: 0 .. n-1, renumbered on removal) */
@@ -47,6 +48,26 @@ typedef struct dem_grains {
     double *inertia;   /* 3 per grain: principal moments, kg m^2 */
     double *angmom;    /* 3 per grain: angular momentum, world frame, kg m^2/s (shaped grains only) */
 } dem_grains;
+
+/* doubles per stored pair: F on i (3), torque on i (3), torque on j (3) */
+#define DEM_PAIR_F 9
+
+/* How T threads share the sphere pairs so that every grain adds its pairs'
+ * contributions in ascending pair index, as one thread does (dem_pairs.c):
+ * grains in T blocks of slots, a pair owned by the block of its i. Rebuilt
+ * with every neighbour list; nothing in it for one thread. */
+typedef struct dem_pair_plan {
+    int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
+    int *own, own_cap;  /* active pairs grouped by block, ascending p inside: own[own_start[t] ..] */
+    int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
+    int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */
+    int *own_start, *cross_start, *in_start; /* T + 1 each */
+    int *count;         /* 3 (T + 1): scratch of the build */
+    int n_cross;
+    double *cf;         /* DEM_PAIR_F per cross pair: force on i, torques on i and j */
+    unsigned char *con; /* per cross pair: in contact this step */
+    int cf_cap;
+} dem_pair_plan;
 
 /* Per-thread force buffers (thread 0 writes the grain arrays directly). */
 typedef struct dem_thread_buf {
@@ -71,19 +92,8 @@ struct dem_world {
     int n_pairs, pair_cap;
     int n_active_pairs; /* pairs [0, n_active_pairs) have an active grain; the rest (frozen-frozen) are skipped */
     int *pi, *pj;
-    /* narrow phase output, read by the gather (sphere pairs): per active pair
-     * its force on i and the torques on i and j (DEM_PAIR_F doubles), and
-     * whether it touched in this step (nothing is written otherwise) */
-    double *pair_f;
-    unsigned char *pair_on;
-    /* per grain slot, its pairs in list order (CSR over slots: adj_start[i]
-     * .. adj_start[i + 1] in adj_ref, entries 2 p + (1 if the grain is the
-     * pair's j)): the gather adds them in this fixed order, so the sums are
-     * the same for any thread count */
-    int *adj_start, *adj_ref;
-    int pair_buf_cap;   /* pairs pair_f, pair_on and adj_ref have room for */
+    dem_pair_plan plan; /* how the threads share the pairs (dem_pairs.c) */
     int walls_near_valid; /* g.wall_near is current (0 after grains or walls changed: every wall is tested) */
-    int adj_valid;      /* 0: the list changed (rebuild, checkpoint), adj_* rebuilt before the next pair stage */
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
     int hist_cur;
@@ -118,8 +128,6 @@ struct dem_world {
     dem_profile prof;
 };
 
-/* doubles per pair in pair_f: F on i (3), torque on i (3), torque on j (3) */
-#define DEM_PAIR_F 9
 
 /* doubles of scratch per grain: the larger of the wall and surface history */
 #define DEM_SCRATCH_PER_GRAIN                                                                         \
@@ -129,6 +137,14 @@ struct dem_world {
 _Static_assert(DEM_SCRATCH_PER_GRAIN >= 4, "scratch holds the saved quaternions of shaped grains");
 
 int dem_world_prepare(dem_world *w, cm_error *err);
+
+/* dem_pairs.c: the plan for the current pair list, and stage "pairs" for
+ * sphere pairs (forces and torques added into the grains; returns the
+ * contacts). dem_pair_force: one pair's force on i and torques on i and j
+ * (out[DEM_PAIR_F]); 1 in contact (shaped worlds' sphere pairs). */
+int dem_pair_plan_build(dem_world *w, cm_error *err);
+int dem_stage_pairs(dem_world *w);
+int dem_pair_force(dem_world *w, int p, double out[DEM_PAIR_F]);
 void dem_grains_permute(dem_world *w, const int *order);
 
 #endif

@@ -65,13 +65,13 @@ static int make_world(int threads, const char *dir, dem_world **w, cm_error *err
 /* The step's stages (dem_profile) and their shares of the step's time. */
 static void print_profile(const dem_profile *p)
 {
-    double tot = p->rebuild + p->surface + p->pairs + p->gather + p->integrate;
+    double tot = p->rebuild + p->surface + p->pairs + p->integrate;
     if (!(tot > 0))
         tot = 1;
-    printf("profile: rebuild %.3f s (%.1f %%) surface %.3f s (%.1f %%) pairs %.3f s (%.1f %%) gather %.3f s (%.1f %%) "
+    printf("profile: rebuild %.3f s (%.1f %%) surface %.3f s (%.1f %%) pairs %.3f s (%.1f %%) "
            "integrate %.3f s (%.1f %%)\n",
            p->rebuild, 100 * p->rebuild / tot, p->surface, 100 * p->surface / tot, p->pairs, 100 * p->pairs / tot,
-           p->gather, 100 * p->gather / tot, p->integrate, 100 * p->integrate / tot);
+           p->integrate, 100 * p->integrate / tot);
 }
 
 /* The stirring velocity of grain id (deterministic). */

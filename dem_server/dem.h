@@ -78,6 +78,8 @@ typedef struct dem_world_def {
     double dt_safety_hertz;    /* dt must be <= this * Hertz contact time (default 0.1) */
     bool allow_unstable;     /* true: a dt above the limits only warns */
     int reorder_every;       /* re-sort grains by cell every N neighbour rebuilds (0 = never) */
+    bool portable_kernel;    /* true: the pair kernel's portable path even where the CPU has AVX2 (the
+                                same bits either way; for the test that shows it) */
 } dem_world_def;
 
 dem_world_def dem_world_def_default(void);

@@ -272,18 +272,211 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const dem_pair
     return contacts;
 }
 
-/* One thread: every pair in list order. */
-static int pairs_serial(const pair_arrays *in, const force_sums *s, int np)
+/* ---- the batched kernel ------------------------------------------------
+ *
+ * The same arithmetic as pair_force, in the same order, for a batch of
+ * pairs in contact: one loop the compiler vectorises, compiled twice: for
+ * the x86-64 baseline (SSE2, two lanes) and for AVX2 (four lanes, chosen
+ * when the CPU has it). Every lane does IEEE operations on its own pair,
+ * branches become selects of values computed both ways, and
+ * -ffp-contract=off forbids fused multiply-adds (target "avx2" does not
+ * enable FMA), so the bits are those of pair_force on any CPU:
+ * test_dem_threads runs the scalar, portable and AVX2 paths against each
+ * other. Rolling resistance, when a material has it, is added in the scalar
+ * scatter that follows. */
+enum { BATCH = 64 };
+
+typedef struct pair_batch {
+    int n;
+    int p[BATCH], i[BATCH], j[BATCH], c[BATCH];
+    double ex[BATCH], ey[BATCH], ez[BATCH], d2[BATCH];
+    /* out: force on i, torques on i and j, the new spring; R and |F_n| for
+     * the rolling torque */
+    double fx[BATCH], fy[BATCH], fz[BATCH];
+    double tix[BATCH], tiy[BATCH], tiz[BATCH], tjx[BATCH], tjy[BATCH], tjz[BATCH];
+    double sx[BATCH], sy[BATCH], sz[BATCH];
+    double R[BATCH], fn[BATCH];
+} pair_batch;
+
+/* Coefficients of every material pair in structure-of-arrays, indexed by
+ * mat_i * DEM_MAX_MATERIALS + mat_j (filled per stage: a few numbers). */
+typedef struct coef_table {
+    double E[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], G[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
+    double gn[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], gt[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
+    double mu[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], st_sn[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
+    int rolling; /* some pair has mu_roll > 0 */
+} coef_table;
+
+static void coef_table_fill(const dem_world *w, coef_table *t)
+{
+    t->rolling = 0;
+    for (int a = 0; a < DEM_MAX_MATERIALS; a++)
+        for (int b = 0; b < DEM_MAX_MATERIALS; b++) {
+            const dem_pair_coef *c = &w->coef[a][b];
+            int k = a * DEM_MAX_MATERIALS + b;
+            t->E[k] = c->E, t->G[k] = c->G, t->gn[k] = c->gamma_n, t->gt[k] = c->gamma_t;
+            t->mu[k] = c->mu, t->st_sn[k] = c->st_sn;
+            t->rolling |= a < w->n_mat && b < w->n_mat && c->mu_roll > 0.0;
+        }
+}
+
+static inline __attribute__((always_inline)) void batch_forces_body(const pair_arrays *in, const coef_table *ct,
+                                                                     pair_batch *b)
+{
+    const double *restrict r = in->r, *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
+    const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
+    const double *restrict inv_m = in->inv_m, *restrict hist = in->hist;
+    const double *restrict cE = ct->E, *restrict cG = ct->G, *restrict cgn = ct->gn, *restrict cgt = ct->gt;
+    const double *restrict cmu = ct->mu, *restrict cst = ct->st_sn;
+    const int *restrict bi = b->i, *restrict bj = b->j, *restrict bc = b->c, *restrict bp = b->p;
+    const double *restrict bex = b->ex, *restrict bey = b->ey, *restrict bez = b->ez, *restrict bd2 = b->d2;
+    double *restrict ofx = b->fx, *restrict ofy = b->fy, *restrict ofz = b->fz;
+    double *restrict otix = b->tix, *restrict otiy = b->tiy, *restrict otiz = b->tiz;
+    double *restrict otjx = b->tjx, *restrict otjy = b->tjy, *restrict otjz = b->tjz;
+    double *restrict osx = b->sx, *restrict osy = b->sy, *restrict osz = b->sz;
+    double *restrict oR = b->R, *restrict ofn = b->fn;
+    const double dt = in->dt;
+    const int n = b->n;
+#pragma omp simd
+    for (int k = 0; k < n; k++) {
+        const int i = bi[k], j = bj[k], c = bc[k], p3 = 3 * bp[k];
+        const double ex = bex[k], ey = bey[k], ez = bez[k];
+        const double ri = r[i], rj = r[j], rs = ri + rj;
+        double d = sqrt(bd2[k]);
+        double delta = rs - d; /* eq. 18 */
+        double nx = ex / d, ny = ey / d, nz = ez / d; /* eq. 10 */
+        double li = ri - 0.5 * delta, lj = rj - 0.5 * delta;
+        double ax = wx[i] * li + wx[j] * lj, ay = wy[i] * li + wy[j] * lj, az = wz[i] * li + wz[j] * lj;
+        /* eq. 12 */
+        double vrx = (vx[i] - vx[j]) - (ay * nz - az * ny);
+        double vry = (vy[i] - vy[j]) - (az * nx - ax * nz);
+        double vrz = (vz[i] - vz[j]) - (ax * ny - ay * nx);
+        double R = ri * rj / rs;                  /* eq. 16 */
+        double m = 1.0 / (inv_m[i] + inv_m[j]);   /* eq. 17 */
+        /* dem_hm_force */
+        double a = sqrt(R * delta);
+        double sn = 2.0 * cE[c] * a;
+        double st = 8.0 * cG[c] * a; /* eq. 25 */
+        double vn = vrx * nx + vry * ny + vrz * nz;
+        double f_el = (2.0 / 3.0) * sn * delta;
+        double sq = sqrt(sn * m);
+        double f_n = f_el - cgn[c] * sq * vn;
+        f_n = f_n < 0.0 ? 0.0 : f_n;
+        double vtx = vrx - nx * vn, vty = vry - ny * vn, vtz = vrz - nz * vn; /* eq. 14 */
+        double ctt = cgt[c] * cst[c] * sq;
+        /* dem_mindlin_spring */
+        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2];
+        double s2 = sx * sx + sy * sy + sz * sz;
+        double dsn = sx * nx + sy * ny + sz * nz;
+        double px = sx - nx * dsn, py = sy - ny * dsn, pz = sz - nz * dsn;
+        double p2 = px * px + py * py + pz * pz;
+        double sc = sqrt(s2 / p2); /* used only where s2 > 0 and p2 > 0 */
+        double qx = p2 > 0.0 ? px * sc : px, qy = p2 > 0.0 ? py * sc : py, qz = p2 > 0.0 ? pz * sc : pz;
+        sx = s2 > 0.0 ? qx : sx, sy = s2 > 0.0 ? qy : sy, sz = s2 > 0.0 ? qz : sz;
+        sx = dt * vtx + sx, sy = dt * vty + sy, sz = dt * vtz + sz;
+        double ftx = sx * -st - vtx * ctt, fty = sy * -st - vty * ctt, ftz = sz * -st - vtz * ctt;
+        double ft2 = ftx * ftx + fty * fty + ftz * ftz;
+        double fmax = cmu[c] * f_n;
+        double kk = fmax / sqrt(ft2); /* used only where sliding, so ft2 > 0 */
+        double inv_st = -1.0 / st;
+        if (ft2 > fmax * fmax) { /* sliding: the capped force, the spring that carries it alone */
+            ftx = ftx * kk, fty = fty * kk, ftz = ftz * kk;
+            sx = st > 0.0 ? ftx * inv_st : 0.0, sy = st > 0.0 ? fty * inv_st : 0.0, sz = st > 0.0 ? ftz * inv_st : 0.0;
+        }
+        osx[k] = sx, osy[k] = sy, osz[k] = sz;
+        double Fx = nx * f_n + ftx, Fy = ny * f_n + fty, Fz = nz * f_n + ftz;
+        ofx[k] = Fx, ofy[k] = Fy, ofz[k] = Fz;
+        /* torques (eq. 7) */
+        double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
+        otix[k] = cx * -li, otiy[k] = cy * -li, otiz[k] = cz * -li;
+        otjx[k] = cx * -lj, otjy[k] = cy * -lj, otjz[k] = cz * -lj;
+        oR[k] = R, ofn[k] = f_n;
+    }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays *in, const coef_table *ct,
+                                                               pair_batch *b)
+{
+    batch_forces_body(in, ct, b);
+}
+#endif
+
+static void batch_forces_portable(const pair_arrays *in, const coef_table *ct, pair_batch *b)
+{
+    batch_forces_body(in, ct, b);
+}
+
+typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);
+
+static batch_fn batch_kernel(const dem_world *w)
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (!w->def.portable_kernel && __builtin_cpu_supports("avx2"))
+        return batch_forces_avx2;
+#endif
+    return batch_forces_portable;
+}
+
+/* The batch's springs back into the history and its forces into the grains,
+ * in pair order (rolling resistance added here where it applies). */
+static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_batch *b, int rolling)
+{
+    for (int k = 0; k < b->n; k++) {
+        int p = b->p[k], i = b->i[k], j = b->j[k];
+        double *xi = a->hist + 3 * (size_t)p;
+        xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
+        double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
+                                b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
+        if (rolling) {
+            const dem_pair_coef *cf = &a->coef[a->mat[i]][a->mat[j]];
+            if (cf->mu_roll > 0.0) {
+                vec3 wi = v3(a->wx[i], a->wy[i], a->wz[i]), wj = v3(a->wx[j], a->wy[j], a->wz[j]);
+                vec3 tr = dem_rolling_torque(cf, b->R[k], b->fn[k], v3_sub(wi, wj),
+                                             1.0 / (a->inv_i[i] + a->inv_i[j]), a->dt);
+                f[3] += tr.x, f[4] += tr.y, f[5] += tr.z;
+                f[6] -= tr.x, f[7] -= tr.y, f[8] -= tr.z;
+            }
+        }
+        add_i(s, i, f);
+        add_j(s, j, f);
+    }
+}
+
+/* One thread: every pair in list order, in batches of the pairs in contact
+ * (the others only lose their springs). */
+static int pairs_serial(const pair_arrays *in, const force_sums *s, int np, const coef_table *ct,
+                        batch_fn batch_forces)
 {
     const pair_arrays a = *in;
+    pair_batch b;
+    b.n = 0;
     int contacts = 0;
-    double f[DEM_PAIR_F];
-    for (int p = 0; p < np; p++)
-        if (pair_force(&a, p, f)) {
-            add_i(s, a.pi[p], f);
-            add_j(s, a.pj[p], f);
-            contacts++;
+    for (int p = 0; p < np; p++) {
+        int i = a.pi[p], j = a.pj[p];
+        double ex = a.x[i] - a.x[j], ey = a.y[i] - a.y[j], ez = a.z[i] - a.z[j];
+        double d2 = ex * ex + ey * ey + ez * ez, rs = a.r[i] + a.r[j];
+        if (d2 >= rs * rs || d2 == 0.0) { /* apart (or coincident centres: no normal) */
+            double *xi = a.hist + 3 * (size_t)p;
+            if (xi[0] != 0.0 || xi[1] != 0.0 || xi[2] != 0.0)
+                xi[0] = xi[1] = xi[2] = 0.0;
+            continue;
         }
+        int k = b.n++;
+        b.p[k] = p, b.i[k] = i, b.j[k] = j, b.c[k] = a.mat[i] * DEM_MAX_MATERIALS + a.mat[j];
+        b.ex[k] = ex, b.ey[k] = ey, b.ez[k] = ez, b.d2[k] = d2;
+        if (b.n == BATCH) {
+            batch_forces(&a, ct, &b);
+            batch_scatter(&a, s, &b, ct->rolling);
+            contacts += b.n;
+            b.n = 0;
+        }
+    }
+    if (b.n > 0) {
+        batch_forces(&a, ct, &b);
+        batch_scatter(&a, s, &b, ct->rolling);
+        contacts += b.n;
+    }
     return contacts;
 }
 
@@ -293,8 +486,11 @@ int dem_stage_pairs(dem_world *w)
     const pair_arrays a = pair_arrays_of(w);
     dem_grains *g = &w->g;
     const force_sums s = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
-    if (nt == 1)
-        return pairs_serial(&a, &s, w->n_active_pairs);
+    if (nt == 1) {
+        coef_table ct;
+        coef_table_fill(w, &ct);
+        return pairs_serial(&a, &s, w->n_active_pairs, &ct, batch_kernel(w));
+    }
     const dem_pair_plan *pl = &w->plan;
     int contacts = 0;
 #ifdef _OPENMP

@@ -10,15 +10,26 @@
 /* A loose bed of n grains dropped on a floor (dem_bed_place), optionally
  * with every grain stirred, and optionally a triangulated plane under it
  * (the surface stage), stepped `steps` times with `threads` threads. */
-static int run_bed(int threads, int n, int steps, int stirred, int surface, int frozen, uint64_t *hash,
-                   dem_stats *st, double *wall_s)
+typedef struct bed_case {
+    int n, steps;
+    bool stirred, surface, frozen;
+    bool portable; /* the pair kernel's portable path even where the CPU has AVX2 */
+} bed_case;
+
+static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, double *wall_s)
 {
+    const int n = c.n;
     dem_material m = test_material(5e6, 0.3, 0.3, 0.5);
     m.rolling_friction = 0.05; /* the rolling torque enters the pair's torques too */
-    double g[3] = {0, 0, -9.81};
-    dem_world *w = test_world(&m, 1, 4e-5, n, g, threads);
-    ENSURE(w);
+    dem_world_def d = dem_world_def_default();
+    d.dt = 4e-5;
+    d.max_grains = n;
+    d.threads = threads;
+    d.gravity[2] = -9.81;
+    d.portable_kernel = c.portable;
+    dem_world *w = NULL;
     cm_error err = {0};
+    ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
     dem_bed_params p = dem_bed_params_default();
     double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.04, 0.2};
     memcpy(p.box_min, lo, sizeof lo);
@@ -33,7 +44,7 @@ static int run_bed(int threads, int n, int steps, int stirred, int surface, int 
     for (int k = 0; k < 5; k++)
         ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
     ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
-    if (surface) { /* a tilted triangulated plane 5 mm above the floor */
+    if (c.surface) { /* a tilted triangulated plane 5 mm above the floor */
         const int nx = 8;
         const double s = 0.05 / nx;
         double *x = malloc(sizeof(double) * 3 * (nx + 1) * (nx + 1));
@@ -46,15 +57,15 @@ static int run_bed(int threads, int n, int steps, int stirred, int surface, int 
         free(x);
         free(t);
     }
-    if (stirred)
+    if (c.stirred)
         for (int id = 0; id < dem_grain_count(w); id++) {
             double v[3] = {0.3 * sin(id), 0.3 * cos(1.7 * id), -0.2}, om[3] = {50 * cos(id), 0, 20 * sin(3 * id)};
             dem_grain_set(w, id, NULL, v, om);
         }
-    if (frozen) /* a third of the box frozen: its frozen pairs move to the end of the list, out of order */
+    if (c.frozen) /* a third of the box frozen: its frozen pairs move to the end of the list, out of order */
         ENSURE(dem_freeze_outside_x(w, 0.013, 1.0) > 0);
     double t0 = cm_now();
-    for (int k = 0; k < steps; k++)
+    for (int k = 0; k < c.steps; k++)
         ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
     *wall_s = cm_now() - t0;
     *hash = dem_world_hash(w);
@@ -63,30 +74,38 @@ static int run_bed(int threads, int n, int steps, int stirred, int surface, int 
     return 0;
 }
 
-static int same_bits_for_thread_counts(int stirred, int surface, int frozen)
+/* One thread runs the batched pair kernel (AVX2 where the CPU has it), a
+ * fourth run its portable path; with 2 and 3 threads most pairs go through
+ * the same batches, the block-crossing ones through the scalar pair_force:
+ * equal hashes say all paths give the same bits. */
+static int same_bits_for_thread_counts(bool stirred, bool surface, bool frozen)
 {
-    uint64_t h[3];
-    dem_stats st[3];
+    uint64_t h[4];
+    dem_stats st[4];
     double wall;
+    bed_case c = {.n = 400, .steps = 1500, .stirred = stirred, .surface = surface, .frozen = frozen};
     for (int t = 0; t < 3; t++)
-        ENSURE(run_bed(t + 1, 400, 1500, stirred, surface, frozen, &h[t], &st[t], &wall) == 0);
-    printf("hash with 1, 2, 3 threads: %016llx %016llx %016llx; %d grain-grain contacts, %d grain-wall, %d "
-           "grain-surface, %ld rebuilds\n",
-           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], st[0].contacts_gg,
-           st[0].contacts_gw, st[0].contacts_gs, st[0].profile.rebuilds);
+        ENSURE(run_bed(t + 1, c, &h[t], &st[t], &wall) == 0);
+    c.portable = true;
+    ENSURE(run_bed(1, c, &h[3], &st[3], &wall) == 0);
+    printf("hash with 1, 2, 3 threads: %016llx %016llx %016llx, portable kernel %016llx; %d grain-grain contacts, "
+           "%d grain-wall, %d grain-surface, %ld rebuilds\n",
+           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], (unsigned long long)h[3],
+           st[0].contacts_gg, st[0].contacts_gw, st[0].contacts_gs, st[0].profile.rebuilds);
     /* the scene must exercise what it claims: pairs in contact and rebuilds */
     ENSURE(st[0].contacts_gg > 50);
     ENSURE(st[0].profile.rebuilds > 5);
     ENSURE(!surface || st[0].contacts_gs > 0);
     ENSURE(h[0] == h[1]);
     ENSURE(h[0] == h[2]);
+    ENSURE(h[0] == h[3]);
     return 0;
 }
 
-static int same_bits_1_2_3_threads(void) { return same_bits_for_thread_counts(0, 0, 0); }
-static int same_bits_stirred(void) { return same_bits_for_thread_counts(1, 0, 0); }
-static int same_bits_with_surface(void) { return same_bits_for_thread_counts(1, 1, 0); }
-static int same_bits_with_frozen(void) { return same_bits_for_thread_counts(1, 0, 1); }
+static int same_bits_1_2_3_threads(void) { return same_bits_for_thread_counts(false, false, false); }
+static int same_bits_stirred(void) { return same_bits_for_thread_counts(true, false, false); }
+static int same_bits_with_surface(void) { return same_bits_for_thread_counts(true, true, false); }
+static int same_bits_with_frozen(void) { return same_bits_for_thread_counts(true, false, true); }
 
 /* The profile counts every step and its stages add up to no more than the
  * steps' wall time measured outside the world (each stage is a part of it). */
@@ -95,7 +114,8 @@ static int profile_covers_the_step(void)
     uint64_t h;
     dem_stats st;
     double wall;
-    ENSURE(run_bed(2, 400, 300, 1, 1, 0, &h, &st, &wall) == 0);
+    bed_case c = {.n = 400, .steps = 300, .stirred = true, .surface = true};
+    ENSURE(run_bed(2, c, &h, &st, &wall) == 0);
     const dem_profile *p = &st.profile;
     double sum = p->rebuild + p->surface + p->pairs + p->integrate;
     printf("300 steps in %.4f s: rebuild %.4f surface %.4f pairs %.4f integrate %.4f (sum %.4f s), %ld "

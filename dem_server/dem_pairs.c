@@ -234,44 +234,6 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
 
 /* ---- the stage --------------------------------------------------------- */
 
-/* Phase B of block t (the whole stage for one thread): its own pairs and the
- * arriving cross pairs merged by p. Returns its contacts (own pairs). */
-static int walk_block(const pair_arrays *in, const force_sums *s, const dem_pair_plan *pl, int t)
-{
-    const pair_arrays a = *in;
-    const int *own = pl->own, *cross = pl->cross, *inc = pl->in;
-    const int *pi = a.pi, *pj = a.pj;
-    int k = pl->own_start[t], ke = pl->own_start[t + 1];
-    int cc = pl->cross_start[t], ce = pl->cross_start[t + 1];
-    int m = pl->in_start[t], me = pl->in_start[t + 1];
-    int contacts = 0;
-    double f[DEM_PAIR_F];
-    while (k < ke || m < me) {
-        int p_own = k < ke ? own[k] : INT_MAX;
-        if (m < me && cross[inc[m]] < p_own) { /* a cross pair arriving at its j */
-            int c = inc[m++];
-            if (pl->con[c])
-                add_j(s, pj[cross[c]], pl->cf + (size_t)DEM_PAIR_F * c);
-            continue;
-        }
-        k++;
-        if (cc < ce && cross[cc] == p_own) { /* own cross pair: computed in phase A */
-            int c = cc++;
-            if (pl->con[c]) {
-                add_i(s, pi[p_own], pl->cf + (size_t)DEM_PAIR_F * c);
-                contacts++;
-            }
-            continue;
-        }
-        if (pair_force(&a, p_own, f)) {
-            add_i(s, pi[p_own], f);
-            add_j(s, pj[p_own], f);
-            contacts++;
-        }
-    }
-    return contacts;
-}
-
 /* ---- the batched kernel ------------------------------------------------
  *
  * The same arithmetic as pair_force, in the same order, for a batch of
@@ -443,16 +405,71 @@ static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_
     }
 }
 
-/* One thread: every pair in list order, in batches of the pairs in contact
- * (the others only lose their springs). */
-static int pairs_serial(const pair_arrays *in, const force_sums *s, int np, const coef_table *ct,
-                        batch_fn batch_forces)
+/* A pair in contact joins the batch; a full batch is computed and added. */
+static inline __attribute__((always_inline)) void batch_push(const pair_arrays *a, const force_sums *s,
+                                                             const coef_table *ct, batch_fn batch_forces,
+                                                             pair_batch *b, int p, int i, int j, double ex,
+                                                             double ey, double ez, double d2)
+{
+    int k = b->n++;
+    b->p[k] = p, b->i[k] = i, b->j[k] = j, b->c[k] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
+    b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
+    if (b->n == BATCH) {
+        batch_forces(a, ct, b);
+        batch_scatter(a, s, b, ct->rolling);
+        b->n = 0;
+    }
+}
+
+static inline void batch_flush(const pair_arrays *a, const force_sums *s, const coef_table *ct,
+                               batch_fn batch_forces, pair_batch *b)
+{
+    if (b->n > 0) {
+        batch_forces(a, ct, b);
+        batch_scatter(a, s, b, ct->rolling);
+        b->n = 0;
+    }
+}
+
+/* The pairs of block t in ascending p, merged with the cross pairs arriving
+ * at its grains as j (phase B); pl NULL: one thread, every active pair.
+ * Pairs in contact go through batches; a stored cross contribution first
+ * flushes the batch, so that each grain still adds in ascending p. Returns
+ * the contacts of the block's own pairs. */
+static int walk_block(const pair_arrays *in, const force_sums *s, const coef_table *ct, batch_fn batch_forces,
+                      const dem_pair_plan *pl, int t, int np)
 {
     const pair_arrays a = *in;
+    const int *own = pl ? pl->own : NULL, *cross = pl ? pl->cross : NULL, *inc = pl ? pl->in : NULL;
+    int k = pl ? pl->own_start[t] : 0, ke = pl ? pl->own_start[t + 1] : np;
+    int cc = pl ? pl->cross_start[t] : 0, ce = pl ? pl->cross_start[t + 1] : 0;
+    int m = pl ? pl->in_start[t] : 0, me = pl ? pl->in_start[t + 1] : 0;
     pair_batch b;
     b.n = 0;
     int contacts = 0;
-    for (int p = 0; p < np; p++) {
+    /* the next stored event (own cross pair or arriving one) by p */
+    int p_cc = cc < ce ? cross[cc] : INT_MAX, p_in = m < me ? cross[inc[m]] : INT_MAX;
+    for (; k < ke || m < me;) {
+        int p = k < ke ? (own ? own[k] : k) : INT_MAX;
+        if (p_in < p) { /* a cross pair arriving at its j */
+            batch_flush(&a, s, ct, batch_forces, &b);
+            int c = inc[m++];
+            if (pl->con[c])
+                add_j(s, a.pj[cross[c]], pl->cf + (size_t)DEM_PAIR_F * c);
+            p_in = m < me ? cross[inc[m]] : INT_MAX;
+            continue;
+        }
+        k++;
+        if (p == p_cc) { /* own cross pair: computed in phase A */
+            batch_flush(&a, s, ct, batch_forces, &b);
+            int c = cc++;
+            if (pl->con[c]) {
+                add_i(s, a.pi[p], pl->cf + (size_t)DEM_PAIR_F * c);
+                contacts++;
+            }
+            p_cc = cc < ce ? cross[cc] : INT_MAX;
+            continue;
+        }
         int i = a.pi[p], j = a.pj[p];
         double ex = a.x[i] - a.x[j], ey = a.y[i] - a.y[j], ez = a.z[i] - a.z[j];
         double d2 = ex * ex + ey * ey + ez * ez, rs = a.r[i] + a.r[j];
@@ -462,21 +479,10 @@ static int pairs_serial(const pair_arrays *in, const force_sums *s, int np, cons
                 xi[0] = xi[1] = xi[2] = 0.0;
             continue;
         }
-        int k = b.n++;
-        b.p[k] = p, b.i[k] = i, b.j[k] = j, b.c[k] = a.mat[i] * DEM_MAX_MATERIALS + a.mat[j];
-        b.ex[k] = ex, b.ey[k] = ey, b.ez[k] = ez, b.d2[k] = d2;
-        if (b.n == BATCH) {
-            batch_forces(&a, ct, &b);
-            batch_scatter(&a, s, &b, ct->rolling);
-            contacts += b.n;
-            b.n = 0;
-        }
+        contacts++;
+        batch_push(&a, s, ct, batch_forces, &b, p, i, j, ex, ey, ez, d2);
     }
-    if (b.n > 0) {
-        batch_forces(&a, ct, &b);
-        batch_scatter(&a, s, &b, ct->rolling);
-        contacts += b.n;
-    }
+    batch_flush(&a, s, ct, batch_forces, &b);
     return contacts;
 }
 
@@ -486,11 +492,11 @@ int dem_stage_pairs(dem_world *w)
     const pair_arrays a = pair_arrays_of(w);
     dem_grains *g = &w->g;
     const force_sums s = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
-    if (nt == 1) {
-        coef_table ct;
-        coef_table_fill(w, &ct);
-        return pairs_serial(&a, &s, w->n_active_pairs, &ct, batch_kernel(w));
-    }
+    coef_table ct;
+    coef_table_fill(w, &ct);
+    const batch_fn bf = batch_kernel(w);
+    if (nt == 1)
+        return walk_block(&a, &s, &ct, bf, NULL, 0, w->n_active_pairs);
     const dem_pair_plan *pl = &w->plan;
     int contacts = 0;
 #ifdef _OPENMP
@@ -507,7 +513,7 @@ int dem_stage_pairs(dem_world *w)
 #ifdef _OPENMP
 #pragma omp barrier
 #endif
-        contacts += walk_block(&a, &s, pl, t);
+        contacts += walk_block(&a, &s, &ct, bf, pl, t, 0);
     }
     return contacts;
 }

@@ -11,6 +11,7 @@
  * pairs, so that pairs and integrate overlap the FEM's step. */
 #include "dem_world.h"
 
+#include <float.h>
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -1213,7 +1214,8 @@ static int stage_pairs_shaped(dem_world *w)
  * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
  * since the last rebuild; returns the first slot with a non-finite position,
  * or INT_MAX. */
-static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2_out)
+static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, int lo, int hi, double dt,
+                                                                 double *maxd2_out)
 {
     double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
     double *restrict vx = g->vx, *restrict vy = g->vy, *restrict vz = g->vz;
@@ -1225,39 +1227,64 @@ static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *max
     double *restrict qa = g->q;
     const unsigned char *restrict frozen = g->frozen;
     double maxd2 = 0.0;
-    int bad = INT_MAX;
+    int nonfinite = 0;
+    /* Branch-free so that it vectorises: a frozen grain's values are computed
+     * and thrown away (selects), the same bits as skipping it. */
+#pragma omp simd reduction(max : maxd2) reduction(| : nonfinite)
     for (int i = lo; i < hi; i++) {
-        if (frozen[i])
-            continue;
+        const int move = !frozen[i];
         double im = inv_m[i], ii = inv_i[i];
-        vx[i] += fx[i] * im * dt;
-        vy[i] += fy[i] * im * dt;
-        vz[i] += fz[i] * im * dt;
-        wx[i] += tx[i] * ii * dt;
-        wy[i] += ty[i] * ii * dt;
-        wz[i] += tz[i] * ii * dt;
-        x[i] += vx[i] * dt;
-        y[i] += vy[i] * dt;
-        z[i] += vz[i] * dt;
+        double nvx = vx[i] + fx[i] * im * dt, nvy = vy[i] + fy[i] * im * dt, nvz = vz[i] + fz[i] * im * dt;
+        double nwx = wx[i] + tx[i] * ii * dt, nwy = wy[i] + ty[i] * ii * dt, nwz = wz[i] + tz[i] * ii * dt;
+        double nx = x[i] + nvx * dt, ny = y[i] + nvy * dt, nz = z[i] + nvz * dt;
         /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
          * the orientation does not feed back into the forces of spheres */
         double *q = qa + 4 * (size_t)i;
-        double hx = 0.5 * dt * wx[i], hy = 0.5 * dt * wy[i], hz = 0.5 * dt * wz[i];
+        double hx = 0.5 * dt * nwx, hy = 0.5 * dt * nwy, hz = 0.5 * dt * nwz;
         double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
         double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
         double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
         double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
         double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
-        q[0] = qw * qn, q[1] = qx * qn, q[2] = qy * qn, q[3] = qz * qn;
-        double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
+        qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
+        q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
+        vx[i] = move ? nvx : vx[i], vy[i] = move ? nvy : vy[i], vz[i] = move ? nvz : vz[i];
+        wx[i] = move ? nwx : wx[i], wy[i] = move ? nwy : wy[i], wz[i] = move ? nwz : wz[i];
+        nx = move ? nx : x[i], ny = move ? ny : y[i], nz = move ? nz : z[i];
+        x[i] = nx, y[i] = ny, z[i] = nz;
+        double ex = nx - x0[i], ey = ny - y0[i], ez = nz - z0[i];
         double d2 = ex * ex + ey * ey + ez * ez;
-        if (d2 > maxd2)
-            maxd2 = d2;
-        if (!isfinite(d2) && i < bad)
-            bad = i;
+        d2 = move ? d2 : 0.0;
+        maxd2 = d2 > maxd2 ? d2 : maxd2;
+        nonfinite |= !(d2 <= DBL_MAX); /* NaN or inf */
     }
     *maxd2_out = maxd2;
-    return bad;
+    if (!nonfinite)
+        return INT_MAX;
+    for (int i = lo; i < hi; i++) { /* the first grain gone non-finite, for the message */
+        double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
+        if (!frozen[i] && !isfinite(ex * ex + ey * ey + ez * ez))
+            return i;
+    }
+    return INT_MAX;
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo, int hi, double dt, double *maxd2)
+{
+    return integrate_body(g, lo, hi, dt, maxd2);
+}
+#endif
+
+/* The AVX2 build of the loop where the CPU has it (and the world does not
+ * ask for the portable one): the same bits, as for the pair kernel. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, bool portable)
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (!portable && __builtin_cpu_supports("avx2"))
+        return integrate_avx2(g, lo, hi, dt, maxd2);
+#endif
+    return integrate_body(g, lo, hi, dt, maxd2);
 }
 
 /* Stage "integrate": integrate_range over the threads, then the rotation
@@ -1277,7 +1304,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, 0, n, dt, &maxd2);
+        bad = integrate_range(g, 0, n, dt, &maxd2, w->def.portable_kernel);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -1285,7 +1312,8 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
         {
             int tid = thread_id();
             double m2;
-            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2);
+            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2,
+                                    w->def.portable_kernel);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;
         }

@@ -14,7 +14,9 @@
  *              merged by p (phase B), so that each grain adds its
  *              contributions in ascending p, as the single loop does.
  * The result is bit-identical for any thread count; only the few pairs
- * across a block boundary are stored. */
+ * across a block boundary are stored. There are a few blocks per thread,
+ * taken by whichever thread is free, so that a thread sharing its core with
+ * fem_server does not hold the others up. */
 #include <limits.h>
 #include <math.h>
 #include <stdlib.h>
@@ -145,8 +147,10 @@ static int owner(int s, int n, int nt)
 int dem_pair_plan_build(dem_world *w, cm_error *err)
 {
     dem_pair_plan *pl = &w->plan;
-    const int n = w->g.n, nt = w->n_threads, np = w->n_active_pairs;
+    const int n = w->g.n, np = w->n_active_pairs;
+    const int nt = w->n_threads == 1 ? 1 : DEM_PLAN_BLOCKS_PER_THREAD * w->n_threads; /* blocks */
     pl->valid = 0;
+    pl->n_blocks = nt;
     if (nt == 1 || n == 0) { /* one thread: the plain loop, no plan needed */
         pl->valid = 1;
         return CM_OK;
@@ -498,22 +502,25 @@ int dem_stage_pairs(dem_world *w)
     if (nt == 1)
         return walk_block(&a, &s, &ct, bf, NULL, 0, w->n_active_pairs);
     const dem_pair_plan *pl = &w->plan;
+    const int nb = pl->n_blocks;
     int contacts = 0;
+    /* Blocks go to whichever thread is free (a core shared with fem_server
+     * must not hold the others up); the bits do not depend on who does one. */
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
     {
 #ifdef _OPENMP
-        int t = omp_get_thread_num();
-#else
-        int t = 0;
+#pragma omp for schedule(dynamic, 1)
 #endif
-        for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++) /* phase A */
-            pl->con[c] = (unsigned char)pair_force(&a, pl->cross[c], pl->cf + (size_t)DEM_PAIR_F * c);
+        for (int t = 0; t < nb; t++) /* phase A; the end of the loop is a barrier */
+            for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++)
+                pl->con[c] = (unsigned char)pair_force(&a, pl->cross[c], pl->cf + (size_t)DEM_PAIR_F * c);
 #ifdef _OPENMP
-#pragma omp barrier
+#pragma omp for schedule(dynamic, 1) nowait
 #endif
-        contacts += walk_block(&a, &s, &ct, bf, pl, t, 0);
+        for (int t = 0; t < nb; t++) /* phase B */
+            contacts += walk_block(&a, &s, &ct, bf, pl, t, 0);
     }
     return contacts;
 }

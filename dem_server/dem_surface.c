@@ -180,13 +180,54 @@ struct dem_surf_scratch {
     int n_shared;                /* candidates after the kept ones that share their reaction */
     int grew_grain;              /* slot of the grain that last grew them this pass, -1 none */
     int nomem;                   /* a growth failed this pass */
+    /* what the thread's contacts give the surface, in grain order, replayed
+     * after the pass (surf_replay): per contact its totals (surf_rec), per
+     * touched node the force added (node_add). Grown (doubling) when full. */
+    struct surf_rec *rec;
+    struct node_add *na;
+    int n_rec, rec_cap, n_na, na_cap;
 };
 typedef struct dem_surf_scratch surf_scratch;
+
+/* One contact's share of the surface totals (dem_surface_total). */
+typedef struct surf_rec {
+    double fs[3], mom[3]; /* reaction on the surface, its moment about the reference point */
+    double along, overlap; /* reaction along the travel direction; overlap / radius */
+    int n_nodes;          /* node_add entries of the contact, following the previous contact's */
+} surf_rec;
+
+/* A node's force from one contact (barycentric share, eq. 42). */
+typedef struct node_add {
+    int node;
+    double f[3];
+} node_add;
+
+/* Room for one more contact with up to n_nodes node entries (0, or the
+ * contact is dropped and nomem set). */
+static int record_room(surf_scratch *sc, int n_nodes)
+{
+    if (sc->n_rec == sc->rec_cap) {
+        int cap = sc->rec_cap ? 2 * sc->rec_cap : 256;
+        surf_rec *r = realloc(sc->rec, (size_t)cap * sizeof *r);
+        if (!r)
+            return sc->nomem = 1, CM_ERR_NOMEM;
+        sc->rec = r, sc->rec_cap = cap;
+    }
+    while (sc->n_na + n_nodes > sc->na_cap) {
+        int cap = sc->na_cap ? 2 * sc->na_cap : 1024;
+        node_add *a = realloc(sc->na, (size_t)cap * sizeof *a);
+        if (!a)
+            return sc->nomem = 1, CM_ERR_NOMEM;
+        sc->na = a, sc->na_cap = cap;
+    }
+    return CM_OK;
+}
 
 static void scratch_free(surf_scratch *sc)
 {
     free(sc->cd), free(sc->cd2), free(sc->near), free(sc->comp), free(sc->kidx), free(sc->sh_n), free(sc->sh_depth);
     free(sc->sh_r), free(sc->pu), free(sc->slot_of), free(sc->nrm), free(sc->peff);
+    free(sc->rec), free(sc->na);
     memset(sc, 0, sizeof *sc);
 }
 
@@ -270,15 +311,12 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->tri = malloc(3 * (size_t)n_tris * sizeof *s->tri);
     s->bvh = calloc(2 * (size_t)n_tris + 1, sizeof *s->bvh);
     s->perm = malloc((size_t)n_tris * sizeof *s->perm);
-    s->ttot = calloc((size_t)n_threads, sizeof *s->ttot);
-    s->tnode_f = n_threads > 1 ? calloc((size_t)(n_threads - 1) * 3 * (size_t)n_nodes, sizeof(double)) : NULL;
     s->scratch = calloc((size_t)n_threads, sizeof *s->scratch);
     int bad = !s->scratch;
     for (int t = 0; t < n_threads && !bad; t++)
         bad = scratch_grow(&s->scratch[t], DEM_SURF_CAND_INIT);
     s->cand_cap_logged = DEM_SURF_CAND_INIT;
-    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || !s->ttot || bad ||
-        (n_threads > 1 && !s->tnode_f) || dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
+    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || bad || dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
         dem_surface_free(&s);
         return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
     }
@@ -306,8 +344,6 @@ void dem_surface_free(dem_surface **sp)
     free(s->bvh);
     free(s->perm);
     free(s->hist);
-    free(s->ttot);
-    free(s->tnode_f);
     for (int t = 0; s->scratch && t < s->n_threads; t++)
         scratch_free(&s->scratch[t]);
     free(s->scratch);
@@ -694,6 +730,29 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_s
     return m;
 }
 
+/* Adds a thread's recorded contacts into the node forces and the totals. */
+static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_total *tot)
+{
+    const node_add *na = sc->na;
+    for (int r = 0; r < sc->n_rec; r++) {
+        const surf_rec *rc = &sc->rec[r];
+        for (int k = 0; k < rc->n_nodes; k++, na++) {
+            double *f = node_f + 3 * na->node;
+            f[0] += na->f[0];
+            f[1] += na->f[1];
+            f[2] += na->f[2];
+        }
+        v3_store(tot->force, v3_add(v3_load(tot->force), v3_load(rc->fs)));
+        v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_load(rc->mom)));
+        if (rc->along > 0.0)
+            tot->traction_pos += rc->along;
+        else
+            tot->traction_neg += rc->along;
+        tot->contacts++;
+        tot->max_overlap = fmax(tot->max_overlap, rc->overlap);
+    }
+}
+
 int dem_surface_contacts(dem_world *w, cm_error *err)
 {
     dem_surface *s = w->surf;
@@ -702,11 +761,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     const double dt = w->def.dt;
     const int nn3 = 3 * s->n_nodes;
     memset(s->node_f, 0, (size_t)nn3 * sizeof *s->node_f);
-    if (nt > 1)
-        memset(s->tnode_f, 0, (size_t)(nt - 1) * (size_t)nn3 * sizeof *s->tnode_f);
-    memset(s->ttot, 0, (size_t)nt * sizeof *s->ttot);
     for (int t = 0; t < nt; t++)
-        s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0;
+        s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0, s->scratch[t].n_rec = s->scratch[t].n_na = 0;
     const dem_bvh_node *root = &s->bvh[0];
     const vec3 ref = v3_load(s->ref), dir = v3_load(s->travel);
     int overflow_slot = -1;
@@ -721,8 +777,6 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         int tid = 0;
 #endif
         int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
-        double *nf = tid == 0 ? s->node_f : s->tnode_f + (size_t)(tid - 1) * (size_t)nn3;
-        dem_surface_total *tot = &s->ttot[tid];
         surf_scratch *sc = &s->scratch[tid];
         for (int i = lo; i < hi; i++) {
             double r = g->r[i];
@@ -852,53 +906,42 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 tsum = v3_add(tsum, dem_rolling_torque(cf, Rc, fn, wi, 1.0 / g->inv_i[i], dt));
                 /* reaction on the surface, to the nodes by barycentric weights
                  * (eq. 42), times the shares in a shared patch: the contact
-                 * point is the same weighted mean, so force and moment balance */
+                 * point is the same weighted mean, so force and moment
+                 * balance. Recorded, summed in grain order after the pass. */
                 vec3 Fs = v3_scale(F, -1.0);
+                if (record_room(sc, 3 * (1 + ns)))
+                    continue;
+                surf_rec *rc = &sc->rec[sc->n_rec++];
+                rc->n_nodes = 0;
                 for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
                     if (j != a && cd[j].patch != a)
                         continue;
                     const int *tn = s->tri + 3 * cd[j].tri;
                     double wj = (j == a ? 1.0 : cd[j].w) / wsum;
                     for (int k = 0; k < 3; k++) {
-                        double bk = wj * cd[j].bary[k], *f = nf + 3 * tn[k];
-                        f[0] += bk * Fs.x;
-                        f[1] += bk * Fs.y;
-                        f[2] += bk * Fs.z;
+                        double bk = wj * cd[j].bary[k];
+                        node_add *na = &sc->na[sc->n_na++];
+                        na->node = tn[k];
+                        na->f[0] = bk * Fs.x, na->f[1] = bk * Fs.y, na->f[2] = bk * Fs.z;
+                        rc->n_nodes++;
                     }
                 }
-                v3_store(tot->force, v3_add(v3_load(tot->force), Fs));
-                v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_cross(v3_sub(p, ref), Fs)));
-                double along = v3_dot(Fs, dir);
-                if (along > 0.0)
-                    tot->traction_pos += along;
-                else
-                    tot->traction_neg += along;
-                tot->contacts++;
-                tot->max_overlap = fmax(tot->max_overlap, delta / Rc);
+                v3_store(rc->fs, Fs);
+                v3_store(rc->mom, v3_cross(v3_sub(p, ref), Fs));
+                rc->along = v3_dot(Fs, dir);
+                rc->overlap = delta / Rc;
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;
             g->tx[i] += tsum.x, g->ty[i] += tsum.y, g->tz[i] += tsum.z;
         }
     }
-    /* merge per-thread results in thread order: deterministic for a given
-     * thread count */
-    for (int t = 1; t < nt; t++) {
-        const double *src = s->tnode_f + (size_t)(t - 1) * (size_t)nn3;
-        for (int k = 0; k < nn3; k++)
-            s->node_f[k] += src[k];
-    }
+    /* the threads' grain ranges ascend with the thread number: replaying
+     * their records in that order adds every node force and total in grain
+     * order, as one thread does (the same bits for any thread count) */
     memset(&s->tot, 0, sizeof s->tot);
-    for (int t = 0; t < nt; t++) {
-        for (int k = 0; k < 3; k++) {
-            s->tot.force[k] += s->ttot[t].force[k];
-            s->tot.moment[k] += s->ttot[t].moment[k];
-        }
-        s->tot.traction_pos += s->ttot[t].traction_pos;
-        s->tot.traction_neg += s->ttot[t].traction_neg;
-        s->tot.contacts += s->ttot[t].contacts;
-        s->tot.max_overlap = fmax(s->tot.max_overlap, s->ttot[t].max_overlap);
-    }
+    for (int t = 0; t < nt; t++)
+        surf_replay(&s->scratch[t], s->node_f, &s->tot);
     for (int t = 0; t < nt; t++) {
         const surf_scratch *sc = &s->scratch[t];
         if (sc->nomem)

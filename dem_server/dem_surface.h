@@ -52,8 +52,6 @@ typedef struct dem_surface {
     double ref[3], travel[3];
     dem_surface_total tot;
     int n_threads;
-    double *tnode_f;          /* (n_threads - 1) * 3 n_nodes */
-    dem_surface_total *ttot;  /* n_threads */
     struct dem_surf_scratch *scratch; /* n_threads candidate buffers (dem_surface.c) */
     int cand_cap_logged;      /* largest candidate buffer size already logged */
 } dem_surface;

@@ -52,12 +52,15 @@ typedef struct dem_grains {
 /* doubles per stored pair: F on i (3), torque on i (3), torque on j (3) */
 #define DEM_PAIR_F 9
 
-/* How T threads share the sphere pairs so that every grain adds its pairs'
+/* How threads share the sphere pairs so that every grain adds its pairs'
  * contributions in ascending pair index, as one thread does (dem_pairs.c):
  * grains in T blocks of slots, a pair owned by the block of its i. Rebuilt
  * with every neighbour list; nothing in it for one thread. */
+enum { DEM_PLAN_BLOCKS_PER_THREAD = 4 };
+
 typedef struct dem_pair_plan {
-    int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
+    int valid;
+    int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
     int *own, own_cap;  /* active pairs grouped by block, ascending p inside: own[own_start[t] ..] */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */

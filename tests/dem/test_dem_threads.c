@@ -10,6 +10,17 @@
 /* A loose bed of n grains dropped on a floor (dem_bed_place), optionally
  * with every grain stirred, and optionally a triangulated plane under it
  * (the surface stage), stepped `steps` times with `threads` threads. */
+enum { nx_surf = 8 }; /* the surface's squares per side */
+
+/* FNV-1a over n bytes, continuing from h. */
+static uint64_t fold(uint64_t h, const void *p, size_t n)
+{
+    const unsigned char *b = p;
+    for (size_t k = 0; k < n; k++)
+        h = (h ^ b[k]) * 1099511628211ULL;
+    return h;
+}
+
 typedef struct bed_case {
     int n, steps;
     bool stirred, surface, frozen;
@@ -45,7 +56,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
         ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
     ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
     if (c.surface) { /* a tilted triangulated plane 5 mm above the floor */
-        const int nx = 8;
+        const int nx = nx_surf;
         const double s = 0.05 / nx;
         double *x = malloc(sizeof(double) * 3 * (nx + 1) * (nx + 1));
         int *t = malloc(sizeof(int) * 6 * nx * nx);
@@ -65,10 +76,21 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     if (c.frozen) /* a third of the box frozen: its frozen pairs move to the end of the list, out of order */
         ENSURE(dem_freeze_outside_x(w, 0.013, 1.0) > 0);
     double t0 = cm_now();
-    for (int k = 0; k < c.steps; k++)
+    uint64_t hs = 1469598103934665603ULL; /* what the surface received, every step (the FEM's input) */
+    for (int k = 0; k < c.steps; k++) {
         ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
+        if (c.surface) {
+            dem_surface_total tot;
+            dem_surface_totals(w, &tot);
+            hs = fold(hs, dem_surface_node_forces(w), sizeof(double) * 3 * (nx_surf + 1) * (nx_surf + 1));
+            double t[9] = {tot.force[0],  tot.force[1],  tot.force[2],        tot.moment[0],   tot.moment[1],
+                           tot.moment[2], tot.traction_pos, tot.traction_neg, tot.max_overlap};
+            hs = fold(hs, t, sizeof t);
+            hs = fold(hs, &tot.contacts, sizeof tot.contacts);
+        }
+    }
     *wall_s = cm_now() - t0;
-    *hash = dem_world_hash(w);
+    *hash = dem_world_hash(w) ^ hs;
     for (int id = 0; id < dem_grain_count(w); id++) { /* and the orientations, which the state hash leaves out */
         dem_grain_state gs;
         ENSURE(dem_grain_get(w, id, &gs) == 0);

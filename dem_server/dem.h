@@ -255,6 +255,7 @@ typedef struct dem_profile {
     double integrate; /* s, Verlet, rotation, the moved-grain check */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */
+    long surface_lists; /* rebuilds of the grains' triangle lists (the tree walked instead of the lists) */
 } dem_profile;
 
 typedef struct dem_stats {

@@ -215,7 +215,8 @@ static void report_profile(const dem_profile *p, const dem_coupled_profile *c, c
     for (int k = 0; k < n_cst; k++)
         ctot += ct[k];
     char line[512];
-    int len = snprintf(line, sizeof line, "profile of the step (%ld steps, %ld rebuilds):", p->steps, p->rebuilds);
+    int len = snprintf(line, sizeof line, "profile of the step (%ld steps, %ld rebuilds, %ld surface list builds):",
+                       p->steps, p->rebuilds, p->surface_lists);
     for (int k = 0; k < n_st; k++)
         len += snprintf(line + len, sizeof line - (size_t)len, " %s %.2f s (%.0f %%)", names[k], t[k],
                         tot > 0 ? 100 * t[k] / tot : 0.0);

@@ -186,6 +186,11 @@ struct dem_surf_scratch {
     struct surf_rec *rec;
     struct node_add *na;
     int n_rec, rec_cap, n_na, na_cap;
+    /* the thread's triangle lists (surface neighbour lists, see
+     * dem_surface_contacts): the grains of its range that have one, in
+     * ascending slot order, list k in ltri[lstart[k] .. lstart[k + 1]) */
+    int *lgrain, *lstart, *ltri;
+    int n_lg, lg_cap, ls_cap, n_lt, lt_cap;
 };
 typedef struct dem_surf_scratch surf_scratch;
 
@@ -227,7 +232,7 @@ static void scratch_free(surf_scratch *sc)
 {
     free(sc->cd), free(sc->cd2), free(sc->near), free(sc->comp), free(sc->kidx), free(sc->sh_n), free(sc->sh_depth);
     free(sc->sh_r), free(sc->pu), free(sc->slot_of), free(sc->nrm), free(sc->peff);
-    free(sc->rec), free(sc->na);
+    free(sc->rec), free(sc->na), free(sc->lgrain), free(sc->lstart), free(sc->ltri);
     memset(sc, 0, sizeof *sc);
 }
 
@@ -307,6 +312,7 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->n_threads = n_threads;
     s->x = malloc(3 * (size_t)n_nodes * sizeof *s->x);
     s->v = calloc(3 * (size_t)n_nodes, sizeof *s->v);
+    s->x_lists = malloc(3 * (size_t)n_nodes * sizeof *s->x_lists);
     s->node_f = calloc(3 * (size_t)n_nodes, sizeof *s->node_f);
     s->tri = malloc(3 * (size_t)n_tris * sizeof *s->tri);
     s->bvh = calloc(2 * (size_t)n_tris + 1, sizeof *s->bvh);
@@ -316,7 +322,8 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     for (int t = 0; t < n_threads && !bad; t++)
         bad = scratch_grow(&s->scratch[t], DEM_SURF_CAND_INIT);
     s->cand_cap_logged = DEM_SURF_CAND_INIT;
-    if (!s->x || !s->v || !s->node_f || !s->tri || !s->bvh || !s->perm || bad || dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
+    if (!s->x || !s->v || !s->x_lists || !s->node_f || !s->tri || !s->bvh || !s->perm || bad ||
+        dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
         dem_surface_free(&s);
         return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
     }
@@ -338,6 +345,7 @@ void dem_surface_free(dem_surface **sp)
         return;
     free(s->x);
     free(s->v);
+    free(s->x_lists);
     free(s->node_f);
     free(s->inv_mass);
     free(s->tri);
@@ -381,6 +389,8 @@ typedef struct near_iter {
     const dem_bvh_node *leaf; /* leaf being read, NULL between leaves */
     int k;                    /* next triangle of the leaf */
     int *overflow;
+    const int *list;          /* non-NULL: the grain's triangle list (BVH order) instead of the tree */
+    int n_list;
 } near_iter;
 
 static inline void near_begin(near_iter *it, const dem_surface *s, vec3 c, double r, int *overflow)
@@ -395,6 +405,8 @@ static inline void near_begin(near_iter *it, const dem_surface *s, vec3 c, doubl
     it->leaf = NULL;
     it->k = 0;
     it->overflow = overflow;
+    it->list = NULL;
+    it->n_list = 0;
 }
 
 /* The next triangle t within r: its region, barycentric weights and closest
@@ -402,6 +414,20 @@ static inline void near_begin(near_iter *it, const dem_surface *s, vec3 c, doubl
 static inline int near_next(near_iter *it, int *t, int *region, double bary[3], double cp[3], double *d2)
 {
     const dem_surface *s = it->s;
+    if (it->list) { /* the listed triangles, in the order the tree would give them */
+        while (it->k < it->n_list) {
+            int tt = it->list[it->k++];
+            const int *tn = s->tri + 3 * tt;
+            int reg = dem_closest_on_triangle(it->p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
+            double dx = it->p[0] - cp[0], dy = it->p[1] - cp[1], dz = it->p[2] - cp[2];
+            double dd = dx * dx + dy * dy + dz * dz;
+            if (dd >= it->r2)
+                continue;
+            *t = tt, *region = reg, *d2 = dd;
+            return 1;
+        }
+        return 0;
+    }
     for (;;) {
         if (it->leaf && it->k < it->leaf->count) {
             int tt = s->perm[it->leaf->first + it->k++];
@@ -538,12 +564,14 @@ static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *s
  * merged, deepest first. A grain on a flat triangulated plane then has exactly
  * one contact wherever it sits. Local minima of one surface patch (a dent)
  * are then merged into its deepest (merge_patches). */
-static int grain_candidates(const dem_surface *s, int i, vec3 c, double r, surf_scratch *sc, int *overflow)
+static int grain_candidates(const dem_surface *s, int i, vec3 c, double r, const int *list, int n_list,
+                            surf_scratch *sc, int *overflow)
 {
     int n = 0;
     sc->n_shared = 0;
     near_iter it;
     near_begin(&it, s, c, r, overflow);
+    it.list = list, it.n_list = n_list;
     cand q;
     while (near_next(&it, &q.tri, &q.region, q.bary, q.p, &q.d2)) {
         if (!scratch_room(sc, n, i))
@@ -612,7 +640,8 @@ static int grain_candidates(const dem_surface *s, int i, vec3 c, double r, surf_
  * still cuts a flat ellipsoid's underside, and MPR reports it with a normal
  * tilted by ~25°) but gets one contact; in a groove with flanks at more than
  * 45°, one per flank. */
-static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_scratch *sc, int *overflow)
+static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, const int *list, int n_list,
+                             surf_scratch *sc, int *overflow)
 {
     const dem_surface *s = w->surf;
     int n = 0;
@@ -622,6 +651,7 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_s
     dem_grain_body(w, i, p, inv_l, &gb);
     near_iter it;
     near_begin(&it, s, c, r, overflow);
+    it.list = list, it.n_list = n_list;
     int tri_id, region;
     double bary_c[3], cp_c[3], d2;
     while (near_next(&it, &tri_id, &region, bary_c, cp_c, &d2)) {
@@ -730,6 +760,71 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, surf_s
     return m;
 }
 
+/* Grows an int array to hold `need` entries (doubling); 0 or CM_ERR_NOMEM. */
+static int grow_ints(int **a, int *cap, int need)
+{
+    if (need <= *cap)
+        return CM_OK;
+    int c = *cap ? *cap : 1024;
+    while (c < need)
+        c *= 2;
+    int *b = realloc(*a, (size_t)c * sizeof *b);
+    if (!b)
+        return CM_ERR_NOMEM;
+    *a = b, *cap = c;
+    return CM_OK;
+}
+
+/* The triangle lists of grains [lo, hi): every triangle whose closest point
+ * lies within r + margin of the grain's centre, in the tree's order. A grain
+ * without one cannot touch the surface before the lists are rebuilt: its
+ * springs are cleared now. Returns the slot of a grain whose tree walk
+ * overflowed, or -1; sets sc->nomem when a list cannot grow. */
+static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi, double margin, surf_scratch *sc)
+{
+    const dem_bvh_node *root = &s->bvh[0];
+    int overflow_slot = -1;
+    sc->n_lg = sc->n_lt = 0;
+    for (int i = lo; i < hi; i++) {
+        double r = g->r[i] + margin;
+        vec3 c = v3(g->x[i], g->y[i], g->z[i]);
+        int start = sc->n_lt;
+        if (!(root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r || root->hi[1] < c.y - r ||
+              root->lo[2] > c.z + r || root->hi[2] < c.z - r)) {
+            int overflow = 0, t, reg;
+            double bary[3], cp[3], d2;
+            near_iter it;
+            near_begin(&it, s, c, r, &overflow);
+            while (near_next(&it, &t, &reg, bary, cp, &d2)) {
+                if (grow_ints(&sc->ltri, &sc->lt_cap, sc->n_lt + 1)) {
+                    sc->nomem = 1;
+                    return overflow_slot;
+                }
+                sc->ltri[sc->n_lt++] = t;
+            }
+            if (overflow && overflow_slot < 0)
+                overflow_slot = i;
+        }
+        if (sc->n_lt > start) {
+            if (grow_ints(&sc->lgrain, &sc->lg_cap, sc->n_lg + 1) || grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 2)) {
+                sc->nomem = 1;
+                return overflow_slot;
+            }
+            sc->lgrain[sc->n_lg] = i;
+            sc->lstart[sc->n_lg++] = start;
+        } else if (g->surf_count[i]) { /* out of reach: its springs go */
+            memset(s->hist + (size_t)i * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE, 0,
+                   DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE * sizeof *s->hist);
+            g->surf_count[i] = 0;
+        }
+    }
+    if (grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 1))
+        sc->nomem = 1;
+    else
+        sc->lstart[sc->n_lg] = sc->n_lt;
+    return overflow_slot;
+}
+
 /* Adds a thread's recorded contacts into the node forces and the totals. */
 static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_total *tot)
 {
@@ -766,6 +861,34 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     const dem_bvh_node *root = &s->bvh[0];
     const vec3 ref = v3_load(s->ref), dir = v3_load(s->travel);
     int overflow_slot = -1;
+    /* Surface neighbour lists: each grain's triangles within r + 2 skin,
+     * built by the tree walk and then read instead of it while they hold.
+     * They hold while no grain moved more than one skin since they were
+     * built (the grain list is rebuilt before any grain moves skin/2 from its
+     * last rebuild, and the triangle lists with it) and no surface node moved
+     * more than one skin (a point of a triangle moves no more than its
+     * fastest node): a triangle within r now was within r + 2 skin then. The
+     * list keeps the tree's order, so the contacts are found in the same
+     * order and the results are the same bits as a walk every step. */
+    const double margin = w->skin;
+    int use_lists = s->lists_valid && s->lists_rebuild == w->rebuild_count && !w->need_rebuild &&
+                    s->lists_n == g->n;
+    if (use_lists) {
+        double moved2 = 0.0;
+        for (int k = 0; k < s->n_nodes; k++) {
+            double dx = s->x[3 * k] - s->x_lists[3 * k], dy = s->x[3 * k + 1] - s->x_lists[3 * k + 1],
+                   dz = s->x[3 * k + 2] - s->x_lists[3 * k + 2];
+            double d2 = dx * dx + dy * dy + dz * dz;
+            moved2 = d2 > moved2 ? d2 : moved2;
+        }
+        use_lists = moved2 <= margin * margin;
+    }
+    if (!use_lists) {
+        memcpy(s->x_lists, s->x, (size_t)nn3 * sizeof *s->x);
+        s->lists_rebuild = w->rebuild_count;
+        s->lists_n = g->n;
+        w->prof.surface_lists++;
+    }
 
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt)
@@ -778,7 +901,19 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
 #endif
         int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
         surf_scratch *sc = &s->scratch[tid];
-        for (int i = lo; i < hi; i++) {
+        if (!use_lists) {
+            int ov = surf_lists_build(s, g, lo, hi, 2.0 * margin, sc);
+            if (ov >= 0) {
+#ifdef _OPENMP
+#pragma omp critical(dem_surface_overflow)
+#endif
+                if (overflow_slot < 0 || ov < overflow_slot)
+                    overflow_slot = ov;
+            }
+        }
+        for (int gk = 0; gk < sc->n_lg && !sc->nomem; gk++) {
+            const int i = sc->lgrain[gk];
+            const int *list = sc->ltri + sc->lstart[gk], n_list = sc->lstart[gk + 1] - sc->lstart[gk];
             double r = g->r[i];
             vec3 c = v3(g->x[i], g->y[i], g->z[i]);
             double *hs = s->hist + (size_t)i * DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
@@ -795,7 +930,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             }
             int overflow = 0;
             const int shaped = g->shape[i] >= 0;
-            int m = shaped ? shaped_candidates(w, i, c, r, sc, &overflow) : grain_candidates(s, i, c, r, sc, &overflow);
+            int m = shaped ? shaped_candidates(w, i, c, r, list, n_list, sc, &overflow)
+                           : grain_candidates(s, i, c, r, list, n_list, sc, &overflow);
             /* the buffers may have grown: read them after the search */
             const cand *cd = sc->cd;
             const double(*sh_n)[3] = (const double(*)[3])sc->sh_n, *sh_depth = sc->sh_depth, *sh_r = sc->sh_r;
@@ -936,6 +1072,9 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
             g->tx[i] += tsum.x, g->ty[i] += tsum.y, g->tz[i] += tsum.z;
         }
     }
+    s->lists_valid = 1;
+    for (int t = 0; t < nt; t++)
+        s->lists_valid &= !s->scratch[t].nomem;
     /* the threads' grain ranges ascend with the thread number: replaying
      * their records in that order adds every node force and total in grain
      * order, as one thread does (the same bits for any thread count) */

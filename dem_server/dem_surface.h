@@ -54,6 +54,12 @@ typedef struct dem_surface {
     int n_threads;
     struct dem_surf_scratch *scratch; /* n_threads candidate buffers (dem_surface.c) */
     int cand_cap_logged;      /* largest candidate buffer size already logged */
+    /* surface neighbour lists (dem_surface_contacts): valid for the grain
+     * list of rebuild lists_rebuild with lists_n grains, surface nodes then
+     * at x_lists */
+    int lists_valid, lists_n;
+    long lists_rebuild;
+    double *x_lists;          /* 3 n_nodes */
 } dem_surface;
 
 /* Closest point of triangle (a, b, c) to p (Ericson, Real-Time Collision

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "fem.h"
 #include "fem_element.h"
@@ -620,6 +621,101 @@ static int pressure_tet10(void)
     return 0;
 }
 
+/* ---- Gmsh second-order tetrahedra ------------------------------------------ */
+
+/* One 10-node tet written in Gmsh's node order (its node 8 on edge (3,2),
+ * node 9 on edge (3,1)) with a 6-node rim triangle on z = 0. */
+static const char *k_tet10_msh =
+    "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"
+    "$PhysicalNames\n2\n2 1 \"rim\"\n3 2 \"tire\"\n$EndPhysicalNames\n"
+    "$Entities\n0 0 1 1\n1 0 0 0 1 1 0 1 1 0\n1 0 0 0 1 1 1 1 2 0\n$EndEntities\n"
+    "$Nodes\n1 10 1 10\n3 1 0 10\n1\n2\n3\n4\n5\n6\n7\n8\n9\n10\n"
+    "0 0 0\n1 0 0\n0 1 0\n0 0 1\n0.5 0 0\n0.5 0.5 0\n0 0.5 0\n0 0 0.5\n0 0.5 0.5\n0.5 0 0.5\n$EndNodes\n"
+    "$Elements\n2 2 1 2\n2 1 9 1\n1 1 2 3 5 6 7\n3 1 11 1\n2 1 2 3 4 5 6 7 8 9 10\n$EndElements\n";
+
+static int gmsh_second_order(void)
+{
+    fem_mesh m;
+    cm_error err = {0};
+    ENSURE_MSG(fem_mesh_parse_gmsh(k_tet10_msh, strlen(k_tet10_msh), "tet10.msh", &m, &err) == CM_OK, "%s",
+               err.msg);
+    ENSURE(m.n_nodes == 10 && m.n_corner == 4 && m.n_tets == 1 && m.tet_mid && m.face_mid && m.n_faces == 4);
+    /* each mid-edge node at its edge's midpoint, in our order (fem_element.h) */
+    double worst = 0;
+    for (int k = 0; k < 6; k++)
+        for (int a = 0; a < 3; a++) {
+            double mid = 0.5 * (m.x[3 * m.tets[fem_tet10_edges[k][0]] + a] + m.x[3 * m.tets[fem_tet10_edges[k][1]] + a]);
+            worst = fmax(worst, fabs(m.x[3 * m.tet_mid[k] + a] - mid));
+        }
+    ENSURE(worst == 0.0);
+    int rim = 0;
+    for (int n = 0; n < m.n_nodes; n++)
+        rim += (m.node_tag[n] & FEM_NODE_RIM) != 0;
+    ENSURE(rim == 6); /* the 6-node rim triangle: 3 corners, 3 mid-edge nodes */
+    fem_solver *s;
+    ENSURE(fem_solver_create(&m, 1e7, 0.3, 1000, 0, 0, &s, &err) == CM_OK);
+    double tot = 0;
+    for (int n = 0; n < m.n_nodes; n++)
+        tot += s->mass[3 * n];
+    ENSURE_REL(tot, 1000.0 / 6.0, 1e-13);
+    fem_solver_destroy(&s);
+    fem_mesh_free(&m);
+    /* nodes 8 and 9 read in our order instead of Gmsh's: refused by the geometry check */
+    char buf[2048];
+    const char *at = strstr(k_tet10_msh, "8 9 10\n$EndElements");
+    ENSURE(at != NULL);
+    snprintf(buf, sizeof buf, "%.*s8 10 9\n$EndElements\n", (int)(at - k_tet10_msh), k_tet10_msh);
+    ENSURE(fem_mesh_parse_gmsh(buf, strlen(buf), "swapped.msh", &m, &err) == CM_ERR_PARSE);
+    ENSURE_MSG(strstr(err.msg, "swapped.msh") && strstr(err.msg, "node order"), "%s", err.msg);
+    /* first- and second-order tets mixed: refused */
+    const char *mixed = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"
+                        "$PhysicalNames\n2\n2 1 \"rim\"\n3 2 \"tire\"\n$EndPhysicalNames\n"
+                        "$Entities\n0 0 1 1\n1 0 0 0 1 1 0 1 1 0\n1 0 0 0 1 1 1 1 2 0\n$EndEntities\n"
+                        "$Nodes\n1 11 1 11\n3 1 0 11\n1\n2\n3\n4\n5\n6\n7\n8\n9\n10\n11\n"
+                        "0 0 0\n1 0 0\n0 1 0\n0 0 1\n0.5 0 0\n0.5 0.5 0\n0 0.5 0\n0 0 0.5\n0 0.5 0.5\n0.5 0 0.5\n"
+                        "0 0 -1\n$EndNodes\n"
+                        "$Elements\n2 2 1 2\n3 1 11 1\n2 1 2 3 4 5 6 7 8 9 10\n3 1 4 1\n3 1 3 2 11\n$EndElements\n";
+    ENSURE(fem_mesh_parse_gmsh(mixed, strlen(mixed), "mixed.msh", &m, &err) == CM_ERR_PARSE);
+    ENSURE_MSG(strstr(err.msg, "mixed"), "%s", err.msg);
+    return 0;
+}
+
+/* The quadratic tire written as .msh (types 9 and 11) reads back the same
+ * elements, mid-edge nodes (coordinates to the bit) and sets. */
+static int gmsh_roundtrip_tet10(void)
+{
+    fem_tire_def d = fem_tire_def_default();
+    d.resolution = 0.25;
+    fem_mesh a, b;
+    cm_error err = {0};
+    ENSURE(fem_mesh_tire_order(&d, 2, &a, &err) == CM_OK);
+    char path[] = "/tmp/fem_test_tet10_XXXXXX";
+    int fd = mkstemp(path);
+    ENSURE(fd >= 0);
+    close(fd);
+    ENSURE_MSG(fem_mesh_write_gmsh(&a, path, &err) == CM_OK, "%s", err.msg);
+    int rc = fem_mesh_read_gmsh(path, &b, &err);
+    unlink(path);
+    ENSURE_MSG(rc == CM_OK, "%s", err.msg);
+    ENSURE(a.n_nodes == b.n_nodes && a.n_corner == b.n_corner && a.n_tets == b.n_tets && a.n_faces == b.n_faces);
+    ENSURE(memcmp(a.tets, b.tets, (size_t)a.n_tets * 4 * sizeof *a.tets) == 0);
+    for (int e = 0; e < a.n_tets; e++)
+        for (int k = 0; k < 6; k++) {
+            int32_t p = a.tet_mid[6 * e + k], q = b.tet_mid[6 * e + k];
+            ENSURE(memcmp(&a.x[3 * p], &b.x[3 * q], 3 * sizeof(double)) == 0);
+            ENSURE((a.node_tag[p] & FEM_NODE_RIM) == (b.node_tag[q] & FEM_NODE_RIM));
+        }
+    for (int f = 0; f < a.n_faces; f++) {
+        int g = fem_mesh_find_face(&b, a.faces[3 * f], a.faces[3 * f + 1], a.faces[3 * f + 2]);
+        ENSURE(g >= 0);
+        ENSURE((a.face_tag[f] & (FEM_FACE_CAVITY | FEM_FACE_CONTACT)) ==
+               (b.face_tag[g] & (FEM_FACE_CAVITY | FEM_FACE_CONTACT)));
+    }
+    fem_mesh_free(&a);
+    fem_mesh_free(&b);
+    return 0;
+}
+
 /* The scene key: fem.element is read, checked and refused with Neo-Hookean. */
 static int element_key(void)
 {
@@ -664,6 +760,8 @@ int main(int argc, char **argv)
         {"stable_step_tet10", stable_step_tet10},
         {"tire_tet10", tire_tet10},
         {"pressure_tet10", pressure_tet10},
+        {"gmsh_second_order", gmsh_second_order},
+        {"gmsh_roundtrip_tet10", gmsh_roundtrip_tet10},
         {"element_key", element_key},
     };
     return test_main(argc, argv, tests, TEST_COUNT(tests));

@@ -551,7 +551,39 @@ int fem_check_elements(const fem_model *m, cm_error *err)
         return CM_OK;
     const fem_mesh *mesh = &m->mesh;
     const double *u = m->s->u;
-    for (int e = 0; e < mesh->n_tets; e++) {
+    for (int e = 0; e < mesh->n_tets && mesh->tet_mid; e++) {
+        /* 10-node elements: det J of X + u and the strain at each quadrature point */
+        int32_t t[10];
+        double X[10][3], x[10][3], ue[10][3], g[10][3], eps[6];
+        fem_mesh_tet_nodes(mesh, e, t);
+        for (int i = 0; i < 10; i++)
+            for (int a = 0; a < 3; a++) {
+                X[i][a] = mesh->x[3 * t[i] + a];
+                ue[i][a] = u[3 * t[i] + a];
+                x[i][a] = X[i][a] + ue[i][a];
+            }
+        for (int q = 0; q < FEM_TET10_GAUSS; q++) {
+            double det0 = fem_tet10_gradients(X, fem_tet10_gauss_L[q], g);
+            fem_tet10_strain(g, ue, eps);
+            double emax = 0.0;
+            for (int k = 0; k < 6; k++)
+                emax = fabs(eps[k]) > emax || eps[k] != eps[k] ? fabs(eps[k]) : emax;
+            double det = fem_tet10_gradients(x, fem_tet10_gauss_L[q], g);
+            if (!(det > 0.0))
+                return cm_fail(err, CM_ERR_NUMERIC,
+                               "fem: 10-node element %d inverted at quadrature point %d (det J %.3g of its initial "
+                               "%.3g) at t = %.6g s (step %ld): the tire is crushed or its integration is unstable; "
+                               "lower fem.dt or coupling.dt, or stiffen fem.material.E",
+                               e, q + 1, det, det0, m->s->time, m->s->steps);
+            if (!(emax <= m->cfg.max_strain))
+                return cm_fail(err, CM_ERR_NUMERIC,
+                               "fem: element %d stretched to a strain of %.3g (fem.max_strain = %.3g) at t = %.6g s "
+                               "(step %ld): far outside linear elasticity, the integration is unstable or the load "
+                               "too high; lower fem.dt or coupling.dt, or raise fem.max_strain if this is meant",
+                               e, emax, m->cfg.max_strain, m->s->time, m->s->steps);
+        }
+    }
+    for (int e = 0; e < mesh->n_tets && !mesh->tet_mid; e++) {
         const int32_t *t = &mesh->tets[4 * e];
         double x[4][3], ue[4][3], grad[4][3], eps[6];
         for (int i = 0; i < 4; i++)

@@ -542,6 +542,46 @@ static int energy_tet10(void)
     return 0;
 }
 
+/* The element guard on 10-node elements: a mid-edge node pushed through
+ * the opposite corner makes det J <= 0 at a quadrature point (the corners'
+ * volume stays positive); a uniform stretch beyond fem.max_strain is named. */
+static int guard_tet10(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.element = FEM_ELEMENT_TET10;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.pressure = 0.0;
+    c.power_iterations = 200;
+    c.dt = 1e-6;
+    fem_model *m;
+    cm_error err = {0};
+    ENSURE_MSG(fem_create(&c, &m, &err) == CM_OK, "%s", err.msg);
+    ENSURE(fem_solve_static(m, &err) == CM_OK);
+    ENSURE_MSG(fem_check_elements(m, &err) == CM_OK, "%s", err.msg);
+    const fem_mesh *mesh = &m->mesh;
+    double *u = m->s->u;
+    const int e = 7;
+    /* mid-edge node of edge (0,1) moved beyond corner 3 */
+    int32_t mid = mesh->tet_mid[6 * e], c3 = mesh->tets[4 * e + 3];
+    for (int a = 0; a < 3; a++)
+        u[3 * mid + a] = 1.5 * (mesh->x[3 * c3 + a] - mesh->x[3 * mid + a]);
+    m->cfg.max_strain = 100.0; /* the inversion, not the strain, is what is tested here */
+    ENSURE(fem_check_elements(m, &err) == CM_ERR_NUMERIC);
+    ENSURE_MSG(strstr(err.msg, "10-node element") && strstr(err.msg, "inverted"), "%s", err.msg);
+    for (int a = 0; a < 3; a++)
+        u[3 * mid + a] = 0.0;
+    ENSURE_MSG(fem_check_elements(m, &err) == CM_OK, "%s", err.msg);
+    m->cfg.max_strain = 0.5;
+    for (int n = 0; n < mesh->n_nodes; n++)
+        u[3 * n] = 0.6 * mesh->x[3 * n]; /* e_xx = 0.6 > 0.5 everywhere */
+    ENSURE(fem_check_elements(m, &err) == CM_ERR_NUMERIC);
+    ENSURE_MSG(strstr(err.msg, "strain of 0.6") && strstr(err.msg, "fem.max_strain"), "%s", err.msg);
+    fem_destroy(&m);
+    return 0;
+}
+
 /* ---- Meshes, sets, interface ---------------------------------------------- */
 
 /* The tire with mid-edge nodes: nodes = corners + edges, every mid-edge node
@@ -819,6 +859,7 @@ int main(int argc, char **argv)
         {"wave_and_stable_step", wave_and_stable_step},
         {"stable_step_tet10", stable_step_tet10},
         {"energy_tet10", energy_tet10},
+        {"guard_tet10", guard_tet10},
         {"tire_tet10", tire_tet10},
         {"pressure_tet10", pressure_tet10},
         {"gmsh_second_order", gmsh_second_order},

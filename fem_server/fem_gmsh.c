@@ -442,7 +442,9 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     }
     if (!have_nodes || !have_elements || n_tets == 0) {
         rc = cm_fail(err, CM_ERR_PARSE, "%s: no %s", name,
-                     !have_nodes ? "$Nodes section" : !have_elements ? "$Elements section" : "tetrahedra (type 4 or 11)");
+                     !have_nodes      ? "$Nodes section"
+                     : !have_elements ? "$Elements section"
+                                      : "tetrahedra (type 4 or 11)");
         goto done;
     }
     /* Nodes no tetrahedron uses (Gmsh writes geometry points such as circle

@@ -602,8 +602,10 @@ static int tire_tet10(void)
     ENSURE_MSG(fem_create(&c, &m10, &err) == CM_OK, "%s", err.msg);
     const fem_mesh *a = &m4->mesh, *b = &m10->mesh;
     ENSURE(b->n_tets == a->n_tets && b->n_corner == a->n_nodes && b->n_faces == a->n_faces);
-    /* Euler for the solid torus-like shell: V - E + F - T = 0 for a solid torus; count edges directly */
+    /* one mid-edge node per edge: Euler's V - E + F - T = 0 of a solid torus (the tire's section, a
+     * disk, revolved), with E the mid-edge nodes and F = (4 T + boundary faces) / 2 */
     int n_mid = b->n_nodes - b->n_corner;
+    ENSURE(b->n_corner - n_mid + (4 * b->n_tets + b->n_faces) / 2 - b->n_tets == 0);
     /* every mid-edge node lies on the tire's section: same radius as the mean of its ends' radii within
      * the chord sag, and off the chord for edges running around */
     int rim4 = 0, rim10 = 0, rim_mid_ok = 1;
@@ -744,7 +746,8 @@ static int gmsh_second_order(void)
     double worst = 0;
     for (int k = 0; k < 6; k++)
         for (int a = 0; a < 3; a++) {
-            double mid = 0.5 * (m.x[3 * m.tets[fem_tet10_edges[k][0]] + a] + m.x[3 * m.tets[fem_tet10_edges[k][1]] + a]);
+            double mid =
+                0.5 * (m.x[3 * m.tets[fem_tet10_edges[k][0]] + a] + m.x[3 * m.tets[fem_tet10_edges[k][1]] + a]);
             worst = fmax(worst, fabs(m.x[3 * m.tet_mid[k] + a] - mid));
         }
     ENSURE(worst == 0.0);

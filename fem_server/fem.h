@@ -39,6 +39,9 @@ typedef enum fem_integrator {
 /* The elastic law: eq. 29, or compressible Neo-Hookean with the same
  * small-strain E and nu (fem_material.h; explicit integrator only). */
 typedef enum fem_material_model { FEM_MATERIAL_LINEAR = 0, FEM_MATERIAL_NEO_HOOKEAN = 1 } fem_material_model;
+/* fem.element: the linear tetrahedron (eq. 34, default) or the 10-node
+ * quadratic one (fem_element.h: no locking in bending; HRZ lumped mass). */
+typedef enum fem_element_type { FEM_ELEMENT_TET4 = 0, FEM_ELEMENT_TET10 = 1 } fem_element_type;
 typedef enum fem_linear_solver { FEM_LINEAR_CHOLMOD = 0, FEM_LINEAR_CG = 1 } fem_linear_solver;
 
 /* Parametric 165/65 R13 tire. Axle along y, rolling in the x-z plane; the
@@ -107,6 +110,7 @@ typedef struct fem_config {
     double rayleigh_alpha;   /* 1/s, C = alpha M + beta K: 0 */
     double rayleigh_beta;    /* s: 0 */
     fem_material_model material_model; /* fem.material.model: linear (default) or neo_hookean (explicit) */
+    fem_element_type element; /* fem.element: tet4 (default) or tet10 */
     fem_integrator integrator;
     double dt;               /* s, largest FEM sub-step */
     bool allow_unstable;     /* explicit: accept dt above the computed limit */

@@ -65,9 +65,12 @@ static int set_nodes(const fem_mesh *m, const planes *p, fem_set set, uint8_t *i
             in[n] = node_on_plane(m, p, set, n);
     } else {
         for (int f = 0; f < m->n_faces; f++)
-            if (face_in(m, p, set, f))
-                for (int q = 0; q < 3; q++)
-                    in[m->faces[3 * f + q]] = 1;
+            if (face_in(m, p, set, f)) {
+                int32_t nd[6];
+                int nn = fem_mesh_face_nodes(m, f, nd); /* with the mid-edge nodes of 10-node elements */
+                for (int q = 0; q < nn; q++)
+                    in[nd[q]] = 1;
+            }
     }
     int count = 0;
     for (int n = 0; n < m->n_nodes; n++)
@@ -125,6 +128,20 @@ int fem_bc_loads(const fem_mesh *m, const fem_config *cfg, double *f, cm_error *
         for (int fc = 0; fc < m->n_faces; fc++) {
             if (!face_in(m, &p, ld->set, fc))
                 continue;
+            if (m->face_mid) { /* 6-node face: int N_k n dA and int N_k dA per node */
+                int32_t nd[6];
+                double an[6][3], aw[6];
+                int nn = fem_mesh_face_nodes(m, fc, nd);
+                fem_mesh_face_load(m, fc, an, aw);
+                for (int q = 0; q < nn; q++) {
+                    area += aw[q];
+                    for (int d = 0; d < 3; d++)
+                        f[3 * nd[q] + d] += ld->type == FEM_LOAD_PRESSURE ? -ld->value[0] * an[q][d]
+                                            : ld->type == FEM_LOAD_TRACTION ? ld->value[d] * aw[q] : 0.0;
+                }
+                faces++;
+                continue;
+            }
             const int32_t *t = &m->faces[3 * fc];
             const double *a = &m->x[3 * t[0]], *b = &m->x[3 * t[1]], *c = &m->x[3 * t[2]];
             double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
@@ -152,6 +169,16 @@ int fem_bc_loads(const fem_mesh *m, const fem_config *cfg, double *f, cm_error *
             for (int fc = 0; fc < m->n_faces; fc++) {
                 if (!face_in(m, &p, ld->set, fc))
                     continue;
+                if (m->face_mid) {
+                    int32_t nd[6];
+                    double an[6][3], aw[6];
+                    int nn = fem_mesh_face_nodes(m, fc, nd);
+                    fem_mesh_face_load(m, fc, an, aw);
+                    for (int q = 0; q < nn; q++)
+                        for (int d = 0; d < 3; d++)
+                            f[3 * nd[q] + d] += ld->value[d] * aw[q] / area;
+                    continue;
+                }
                 const int32_t *t = &m->faces[3 * fc];
                 const double *a = &m->x[3 * t[0]], *b = &m->x[3 * t[1]], *c = &m->x[3 * t[2]];
                 double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};

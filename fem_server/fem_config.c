@@ -24,6 +24,10 @@
  *                model = "linear" | "neo_hookean"; };  # optional, default linear (eq. 29);
  *                # neo_hookean: compressible Neo-Hookean with the same small-strain E and nu,
  *                # explicit integrator only (fem_material.h); the static start stays linear
+ *   element = "tet4" | "tet10"; # optional, default tet4: the linear tetrahedron (eq. 34; locks in
+ *                               # bending); tet10: 10-node quadratic tetrahedron with HRZ lumped mass
+ *                               # (fem_element.h), the tire and box meshes get mid-edge nodes, Gmsh
+ *                               # files may hold second-order tets (type 11); linear material only
  *   integrator = "explicit" | "newmark" | "rigid";
  *   dt = 1.0e-5;                # s, largest sub-step
  *   allow_unstable = false;     # explicit: accept dt above the computed limit
@@ -212,6 +216,12 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     if (c->material_model == FEM_MATERIAL_NEO_HOOKEAN && c->integrator == FEM_INTEGRATOR_NEWMARK)
         return cm_fail(err, CM_ERR_RANGE, "%s: fem.material.model = \"neo_hookean\" needs fem.integrator = "
                        "\"explicit\": Newmark's linear solve cannot use it yet", cm_scene_path(s));
+    static const char *const elements[] = {"tet4", "tet10", NULL};
+    TRY(cm_scene_choice_opt(s, "fem.element", elements, FEM_ELEMENT_TET4, &k, err));
+    c->element = (fem_element_type)k;
+    if (c->element == FEM_ELEMENT_TET10 && c->material_model == FEM_MATERIAL_NEO_HOOKEAN)
+        return cm_fail(err, CM_ERR_RANGE, "%s: fem.element = \"tet10\" is linear elastic only: fem.material.model "
+                       "= \"neo_hookean\" needs fem.element = \"tet4\"", cm_scene_path(s));
     TRY(cm_scene_double(s, "fem.dt", 1e-12, 1.0, &c->dt, err));
     TRY(cm_scene_bool_opt(s, "fem.allow_unstable", false, &c->allow_unstable, err));
     TRY(cm_scene_choice_opt(s, "fem.static_solver", solvers, FEM_LINEAR_CHOLMOD, &k, err));

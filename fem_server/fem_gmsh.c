@@ -1,7 +1,8 @@
-/* Gmsh .msh v4.1 ASCII reader: 4-node tetrahedra (type 4) form the body;
- * physical groups named "rim" (any dimension: their nodes are fixed),
- * "cavity" and "contact" (3-node triangles, type 2, on the boundary) give
- * the named sets. Everything read is checked: a malformed file gives an
+/* Gmsh .msh v4.1 ASCII reader: 4-node tetrahedra (type 4) or 10-node ones
+ * (type 11, fem.element = "tet10") form the body; physical groups named
+ * "rim" (any dimension: their nodes are fixed), "cavity" and "contact"
+ * (3- or 6-node triangles, type 2 or 9, on the boundary) give the named
+ * sets. Everything read is checked: a malformed file gives an
  * error naming the file, the line and what was expected. */
 #include <errno.h>
 #include <limits.h>
@@ -10,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fem_element.h"
 #include "fem_model.h"
 #include "log.h"
 
@@ -146,6 +148,8 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     double *xs = NULL;
     long *tag_to_index = NULL, min_tag = 0, max_tag = -1, n_nodes = 0, nodes_read = 0;
     long *tet_nodes = NULL, *tet_ids = NULL, n_tets = 0, cap_tets = 0;
+    long *tet_mids = NULL; /* second-order tets (type 11): 6 mid-edge nodes each, in our order */
+    int tet_type = 0;      /* 4 or 11, the first tetrahedra's; a mesh mixing both is refused */
     long *tri = NULL, n_tri = 0, cap_tri = 0; /* 3 node tags + flags + line */
     unsigned char *rim_tag = NULL;
     long *renum = NULL; /* file node index -> mesh node index, -1 if unused */
@@ -356,8 +360,14 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                     if (fl & G_RIM)
                         for (int k = 0; k < nn; k++)
                             rim_tag[nd[k]] = 1;
-                    if (type == 4) {
-                        if (n_tets >= INT_MAX / 4) {
+                    if (type == 4 || type == 11) {
+                        if (tet_type != 0 && tet_type != type) {
+                            rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: element %ld: first-order (type 4) and "
+                                         "second-order (type 11) tetrahedra mixed in one mesh", name, r.line, id);
+                            goto done;
+                        }
+                        tet_type = (int)type;
+                        if (n_tets >= INT_MAX / 6) {
                             rc = cm_fail(err, CM_ERR_PARSE, "%s:%d: more than %d tetrahedra", name, r.line,
                                          INT_MAX / 4);
                             goto done;
@@ -366,18 +376,29 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
                             cap_tets = cap_tets ? 2 * cap_tets : 1024;
                             long *t1 = realloc(tet_nodes, (size_t)cap_tets * 4 * sizeof *t1);
                             long *t2 = t1 ? realloc(tet_ids, (size_t)cap_tets * sizeof *t2) : NULL;
+                            long *t3 = t2 && type == 11 ? realloc(tet_mids, (size_t)cap_tets * 6 * sizeof *t3)
+                                                         : NULL;
                             if (t1)
                                 tet_nodes = t1;
                             if (t2)
                                 tet_ids = t2;
-                            if (!t1 || !t2) {
+                            if (t3)
+                                tet_mids = t3;
+                            if (!t1 || !t2 || (type == 11 && !t3)) {
                                 rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", name);
                                 goto done;
                             }
                         }
                         memcpy(&tet_nodes[4 * n_tets], nd, 4 * sizeof *nd);
+                        if (type == 11) {
+                            /* Gmsh's 10-node tet: 4 (0,1), 5 (1,2), 6 (2,0), 7 (3,0), 8 (3,2),
+                             * 9 (3,1); ours (fem_element.h) has (1,3) before (2,3) */
+                            static const int g2o[6] = {4, 5, 6, 7, 9, 8};
+                            for (int k = 0; k < 6; k++)
+                                tet_mids[6 * n_tets + k] = nd[g2o[k]];
+                        }
                         tet_ids[n_tets++] = id;
-                    } else if (type == 2 && (fl & (G_CAVITY | G_CONTACT))) {
+                    } else if ((type == 2 || type == 9) && (fl & (G_CAVITY | G_CONTACT))) {
                         if (n_tri == cap_tri) {
                             cap_tri = cap_tri ? 2 * cap_tri : 1024;
                             long *t1 = realloc(tri, (size_t)cap_tri * 6 * sizeof *t1);
@@ -421,7 +442,9 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     }
     if (!have_nodes || !have_elements || n_tets == 0) {
         rc = cm_fail(err, CM_ERR_PARSE, "%s: no %s", name,
-                     !have_nodes ? "$Nodes section" : !have_elements ? "$Elements section" : "tetrahedra (type 4)");
+                     !have_nodes      ? "$Nodes section"
+                     : !have_elements ? "$Elements section"
+                                      : "tetrahedra (type 4 or 11)");
         goto done;
     }
     /* Nodes no tetrahedron uses (Gmsh writes geometry points such as circle
@@ -439,7 +462,20 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     for (long i = 0; i < n_nodes; i++)
         if (renum[i] == 0)
             renum[i] = n_used++;
+    long n_corner = n_used; /* corners first, then the mid-edge nodes (fem_mesh.h) */
+    if (tet_mids) {
+        for (long e = 0; e < 6 * n_tets; e++) {
+            if (renum[tet_mids[e]] >= 0 && renum[tet_mids[e]] < n_corner) {
+                rc = cm_fail(err, CM_ERR_PARSE, "%s: element %ld: node %ld is a corner and a mid-edge node", name,
+                             tet_ids[e / 6], tet_mids[e] + min_tag);
+                goto done;
+            }
+            if (renum[tet_mids[e]] < 0)
+                renum[tet_mids[e]] = n_used++;
+        }
+    }
     TRY(fem_mesh_alloc(m, (int)n_used, (int)n_tets, err));
+    m->n_corner = (int)n_corner;
     snprintf(m->source, sizeof m->source, "%s", name);
     int n_rim = 0;
     for (long i = 0; i < n_nodes; i++) {
@@ -454,6 +490,38 @@ int fem_mesh_parse_gmsh(const char *text, size_t len, const char *name, fem_mesh
     for (long e = 0; e < 4 * n_tets; e++)
         m->tets[e] = (int32_t)renum[tet_nodes[e]];
     TRY(fem_mesh_finish(m, false, tet_ids, err));
+    if (tet_mids) {
+        m->tet_mid = malloc((size_t)6 * (size_t)n_tets * sizeof *m->tet_mid);
+        if (!m->tet_mid) {
+            rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", name);
+            goto done;
+        }
+        for (long e = 0; e < 6 * n_tets; e++)
+            m->tet_mid[e] = (int32_t)renum[tet_mids[e]];
+        /* A node order read wrongly (e.g. Gmsh's 8 and 9 taken as ours)
+         * puts mid-edge nodes on other edges, half an edge away from their
+         * own edge's midpoint on a regular tet: refuse a node farther than
+         * 0.4 of its edge's length from the midpoint (a curved edge on a
+         * 90-degree arc in one element has its node 0.21 lengths off). */
+        for (long e = 0; e < n_tets; e++)
+            for (int k = 0; k < 6; k++) {
+                const double *p = &m->x[3 * m->tet_mid[6 * e + k]];
+                const double *pa = &m->x[3 * m->tets[4 * e + fem_tet10_edges[k][0]]];
+                const double *pb = &m->x[3 * m->tets[4 * e + fem_tet10_edges[k][1]]];
+                double d2 = 0, l2 = 0;
+                for (int q = 0; q < 3; q++) {
+                    d2 += (p[q] - 0.5 * (pa[q] + pb[q])) * (p[q] - 0.5 * (pa[q] + pb[q]));
+                    l2 += (pb[q] - pa[q]) * (pb[q] - pa[q]);
+                }
+                if (!(d2 < 0.16 * l2)) {
+                    rc = cm_fail(err, CM_ERR_PARSE, "%s: second-order element %ld: mid-edge node %d lies %.3g edge "
+                                 "lengths from its edge's midpoint (node order?)", name, tet_ids[e],
+                                 k + 4, sqrt(d2 / l2));
+                    goto done;
+                }
+            }
+        TRY(fem_mesh_faces_quadratic(m, err));
+    }
     for (long k = 0; k < n_tri; k++) {
         const long *q = &tri[6 * k];
         int f = fem_mesh_find_face(m, (int)renum[q[0]], (int)renum[q[1]], (int)renum[q[2]]);
@@ -477,6 +545,7 @@ done:
     free(tag_to_index);
     free(tet_nodes);
     free(tet_ids);
+    free(tet_mids);
     free(tri);
     free(rim_tag);
     free(renum);
@@ -544,19 +613,30 @@ int fem_mesh_write_gmsh(const fem_mesh *m, const char *path, cm_error *err)
     for (int s = 1; s <= 4; s++) {
         if (!count[s])
             continue;
-        fprintf(fp, "2 %d 2 %d\n", s, count[s]);
+        fprintf(fp, "2 %d %d %d\n", s, m->face_mid ? 9 : 2, count[s]);
         for (int f = 0; f < m->n_faces; f++) {
             uint8_t t = m->face_tag[f];
             int sf = (t & FEM_FACE_RIM) ? 1 : (t & FEM_FACE_CAVITY) ? 2 : (t & FEM_FACE_CONTACT) ? 3 : 4;
-            if (sf == s)
-                fprintf(fp, "%ld %d %d %d\n", id++, m->faces[3 * f] + 1, m->faces[3 * f + 1] + 1,
-                        m->faces[3 * f + 2] + 1);
+            if (sf != s)
+                continue;
+            int32_t nd[6];
+            int nn = fem_mesh_face_nodes(m, f, nd); /* 6-node triangle: corners, then (0,1), (1,2), (2,0) */
+            fprintf(fp, "%ld", id++);
+            for (int q = 0; q < nn; q++)
+                fprintf(fp, " %d", nd[q] + 1);
+            fprintf(fp, "\n");
         }
     }
-    fprintf(fp, "3 1 4 %d\n", m->n_tets);
-    for (int e = 0; e < m->n_tets; e++)
-        fprintf(fp, "%ld %d %d %d %d\n", id++, m->tets[4 * e] + 1, m->tets[4 * e + 1] + 1, m->tets[4 * e + 2] + 1,
-                m->tets[4 * e + 3] + 1);
+    fprintf(fp, "3 1 %d %d\n", m->tet_mid ? 11 : 4, m->n_tets);
+    for (int e = 0; e < m->n_tets; e++) {
+        int32_t nd[10];
+        int nn = fem_mesh_tet_nodes(m, e, nd);
+        static const int o2g[10] = {0, 1, 2, 3, 4, 5, 6, 7, 9, 8}; /* Gmsh's 8 is (2,3), its 9 (1,3) */
+        fprintf(fp, "%ld", id++);
+        for (int q = 0; q < nn; q++)
+            fprintf(fp, " %d", nd[o2g[q]] + 1);
+        fprintf(fp, "\n");
+    }
     fprintf(fp, "$EndElements\n");
     if (ferror(fp) | (fclose(fp) != 0))
         return cm_fail(err, CM_ERR_IO, "%s: write error", path);

@@ -14,6 +14,7 @@ int fem_mesh_alloc(fem_mesh *m, int n_nodes, int n_tets, cm_error *err)
     memset(m, 0, sizeof *m);
     m->n_nodes = n_nodes;
     m->n_tets = n_tets;
+    m->n_corner = n_nodes;
     m->x = calloc((size_t)3 * (size_t)(n_nodes > 0 ? n_nodes : 1), sizeof *m->x);
     m->tets = calloc((size_t)4 * (size_t)(n_tets > 0 ? n_tets : 1), sizeof *m->tets);
     m->node_tag = calloc((size_t)(n_nodes > 0 ? n_nodes : 1), 1);
@@ -34,6 +35,8 @@ void fem_mesh_free(fem_mesh *m)
     free(m->face_sorted);
     free(m->node_tag);
     free(m->node_ijk);
+    free(m->tet_mid);
+    free(m->face_mid);
     memset(m, 0, sizeof *m);
 }
 
@@ -310,7 +313,7 @@ int fem_mesh_from_grid(const fem_grid *g, fem_mesh *m, cm_error *err)
                 int n = id[grid_node(g, i, j, k)];
                 if (n < 0)
                     continue;
-                g->map(g->ctx, i, j, k, &m->x[3 * n]);
+                g->map(g->ctx, (double)i, (double)j, (double)k, &m->x[3 * n]);
                 m->node_ijk[3 * n] = i;
                 m->node_ijk[3 * n + 1] = j;
                 m->node_ijk[3 * n + 2] = k;
@@ -346,7 +349,7 @@ typedef struct box_ctx {
     int n[3];
 } box_ctx;
 
-static void box_map(const void *ctx, int i, int j, int k, double x[3])
+static void box_map(const void *ctx, double i, double j, double k, double x[3])
 {
     const box_ctx *b = ctx;
     x[0] = b->size[0] * i / b->n[0];
@@ -365,6 +368,20 @@ static bool face_on_plane(const fem_mesh *m, int f, int axis, int value)
 
 int fem_mesh_box(const double size[3], const int cells[3], fem_mesh *m, cm_error *err)
 {
+    return fem_mesh_box_order(size, cells, 1, m, err);
+}
+
+static int check_order(int order, const char *what, cm_error *err)
+{
+    return order == 1 || order == 2 ? CM_OK
+                                    : cm_fail(err, CM_ERR_RANGE, "%s: element order %d (1 or 2 expected)", what, order);
+}
+
+int fem_mesh_box_order(const double size[3], const int cells[3], int order, fem_mesh *m, cm_error *err)
+{
+    int rc = check_order(order, "box mesh", err);
+    if (rc)
+        return rc;
     for (int a = 0; a < 3; a++)
         if (!(size[a] > 0.0) || cells[a] < 1)
             return cm_fail(err, CM_ERR_RANGE, "box mesh: size and cells must be positive (axis %d)", a);
@@ -372,7 +389,7 @@ int fem_mesh_box(const double size[3], const int cells[3], fem_mesh *m, cm_error
     fem_grid g = {cells[0], cells[1], cells[2], false, box_map, NULL, &b};
     memset(m, 0, sizeof *m);
     snprintf(m->source, sizeof m->source, "box mesh");
-    int rc = fem_mesh_from_grid(&g, m, err);
+    rc = fem_mesh_from_grid(&g, m, err);
     if (rc)
         return rc;
     for (int n = 0; n < m->n_nodes; n++)
@@ -386,7 +403,7 @@ int fem_mesh_box(const double size[3], const int cells[3], fem_mesh *m, cm_error
         if (face_on_plane(m, f, 2, cells[2]))
             m->face_tag[f] |= FEM_FACE_CONTACT;
     }
-    return CM_OK;
+    return order == 2 ? fem_mesh_make_quadratic(m, &g, err) : CM_OK;
 }
 
 /* ---- Tube ----------------------------------------------------------------- */
@@ -396,7 +413,7 @@ typedef struct tube_ctx {
     int nt, nr, nz;
 } tube_ctx;
 
-static void tube_map(const void *ctx, int i, int j, int k, double x[3])
+static void tube_map(const void *ctx, double i, double j, double k, double x[3])
 {
     const tube_ctx *t = ctx;
     double th = 2.0 * M_PI * i / t->nt, r = t->ri + (t->ro - t->ri) * j / t->nr;
@@ -407,13 +424,22 @@ static void tube_map(const void *ctx, int i, int j, int k, double x[3])
 
 int fem_mesh_tube(double ri, double ro, double L, int n_theta, int n_r, int n_z, fem_mesh *m, cm_error *err)
 {
+    return fem_mesh_tube_order(ri, ro, L, n_theta, n_r, n_z, 1, m, err);
+}
+
+int fem_mesh_tube_order(double ri, double ro, double L, int n_theta, int n_r, int n_z, int order, fem_mesh *m,
+                        cm_error *err)
+{
+    int rc = check_order(order, "tube mesh", err);
+    if (rc)
+        return rc;
     if (!(ri > 0.0 && ro > ri && L > 0.0) || n_theta < 3 || n_r < 1 || n_z < 1)
         return cm_fail(err, CM_ERR_RANGE, "tube mesh: need 0 < ri < ro, L > 0, n_theta >= 3");
     tube_ctx t = {ri, ro, L, n_theta, n_r, n_z};
     fem_grid g = {n_theta, n_r, n_z, true, tube_map, NULL, &t};
     memset(m, 0, sizeof *m);
     snprintf(m->source, sizeof m->source, "tube mesh");
-    int rc = fem_mesh_from_grid(&g, m, err);
+    rc = fem_mesh_from_grid(&g, m, err);
     if (rc)
         return rc;
     for (int n = 0; n < m->n_nodes; n++)
@@ -427,7 +453,7 @@ int fem_mesh_tube(double ri, double ro, double L, int n_theta, int n_r, int n_z,
         if (face_on_plane(m, f, 2, 0) || face_on_plane(m, f, 2, n_z))
             m->face_tag[f] |= FEM_FACE_RIM;
     }
-    return CM_OK;
+    return order == 2 ? fem_mesh_make_quadratic(m, &g, err) : CM_OK;
 }
 
 /* ---- Tire ----------------------------------------------------------------- */
@@ -459,12 +485,12 @@ typedef struct tire_ctx {
 
 /* Mid-line point (y, r) and outward unit normal (away from the cavity) at
  * section grid line j. */
-static void tire_section(const tire_ctx *t, int j, double p[2], double n[2])
+static void tire_section(const tire_ctx *t, double j, double p[2], double n[2])
 {
     double rho = t->d.shoulder_radius, b = t->b, rt = t->rt, rr = t->d.rim_radius;
     int a0 = t->n_side, a1 = a0 + t->n_arc, f1 = a1 + t->n_flat, b1 = f1 + t->n_arc;
     if (j <= a0) { /* left sidewall, from the rim up */
-        double s = (double)j / t->n_side;
+        double s = j / t->n_side;
         p[0] = -b;
         p[1] = rr + s * (rt - rho - rr);
         n[0] = -1.0;
@@ -496,7 +522,7 @@ static void tire_section(const tire_ctx *t, int j, double p[2], double n[2])
     }
 }
 
-static void tire_map(const void *ctx, int i, int j, int k, double x[3])
+static void tire_map(const void *ctx, double i, double j, double k, double x[3])
 {
     const tire_ctx *t = ctx;
     double p[2], n[2];
@@ -531,6 +557,14 @@ static int iround_min1(double v)
 
 int fem_mesh_tire(const fem_tire_def *d, fem_mesh *m, cm_error *err)
 {
+    return fem_mesh_tire_order(d, 1, m, err);
+}
+
+int fem_mesh_tire_order(const fem_tire_def *d, int order, fem_mesh *m, cm_error *err)
+{
+    int rc = check_order(order, "tire mesh", err);
+    if (rc)
+        return rc;
     tire_ctx t;
     memset(&t, 0, sizeof t);
     t.d = *d;
@@ -566,7 +600,7 @@ int fem_mesh_tire(const fem_tire_def *d, fem_mesh *m, cm_error *err)
     fem_grid g = {t.n_theta, t.n_s, t.n_wall + t.n_lug, true, tire_map, tire_cell, &t};
     memset(m, 0, sizeof *m);
     snprintf(m->source, sizeof m->source, "tire mesh");
-    int rc = fem_mesh_from_grid(&g, m, err);
+    rc = fem_mesh_from_grid(&g, m, err);
     if (rc)
         return rc;
     for (int n = 0; n < m->n_nodes; n++) {
@@ -593,5 +627,209 @@ int fem_mesh_tire(const fem_tire_def *d, fem_mesh *m, cm_error *err)
                 m->face_tag[f] |= FEM_FACE_CONTACT;
         }
     }
+    return order == 2 ? fem_mesh_make_quadratic(m, &g, err) : CM_OK;
+}
+
+/* ---- Quadratic (10-node) meshes ----------------------------------------- */
+
+int fem_mesh_tet_nodes(const fem_mesh *m, int e, int32_t nodes[10])
+{
+    memcpy(nodes, &m->tets[4 * (size_t)e], 4 * sizeof *nodes);
+    if (!m->tet_mid)
+        return 4;
+    memcpy(nodes + 4, &m->tet_mid[6 * (size_t)e], 6 * sizeof *nodes);
+    return 10;
+}
+
+int fem_mesh_face_nodes(const fem_mesh *m, int f, int32_t nodes[6])
+{
+    memcpy(nodes, &m->faces[3 * (size_t)f], 3 * sizeof *nodes);
+    if (!m->face_mid)
+        return 3;
+    memcpy(nodes + 3, &m->face_mid[3 * (size_t)f], 3 * sizeof *nodes);
+    return 6;
+}
+
+/* Mid-edge node of edge (a,b) of tet e, -1 when (a,b) is not one of its edges. */
+static int32_t tet_edge_mid(const fem_mesh *m, int e, int32_t a, int32_t b)
+{
+    const int32_t *t = &m->tets[4 * (size_t)e];
+    for (int k = 0; k < 6; k++) {
+        int32_t p = t[fem_tet10_edges[k][0]], q = t[fem_tet10_edges[k][1]];
+        if ((p == a && q == b) || (p == b && q == a))
+            return m->tet_mid[6 * (size_t)e + (size_t)k];
+    }
+    return -1;
+}
+
+int fem_mesh_faces_quadratic(fem_mesh *m, cm_error *err)
+{
+    free(m->face_mid);
+    m->face_mid = malloc((size_t)3 * (size_t)(m->n_faces ? m->n_faces : 1) * sizeof *m->face_mid);
+    if (!m->face_mid)
+        return cm_fail(err, CM_ERR_NOMEM, "%s: cannot allocate the faces' mid-edge nodes", m->source);
+    for (int f = 0; f < m->n_faces; f++)
+        for (int k = 0; k < 3; k++) {
+            int32_t mid = tet_edge_mid(m, m->face_tet[f], m->faces[3 * f + k], m->faces[3 * f + (k + 1) % 3]);
+            if (mid < 0)
+                return cm_fail(err, CM_ERR_STATE, "%s: boundary face %d is not a face of its element %d", m->source,
+                               f, m->face_tet[f]);
+            m->face_mid[3 * f + k] = mid;
+        }
     return CM_OK;
+}
+
+typedef struct edge_rec {
+    int32_t lo, hi; /* corner nodes, lo < hi */
+    int32_t slot;   /* 6 * tet + local edge */
+} edge_rec;
+
+static int edge_rec_cmp(const void *pa, const void *pb)
+{
+    const edge_rec *a = pa, *b = pb;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    return (a->slot > b->slot) - (a->slot < b->slot);
+}
+
+int fem_mesh_make_quadratic(fem_mesh *m, const fem_grid *g, cm_error *err)
+{
+    if (m->tet_mid)
+        return CM_OK;
+    if ((double)m->n_tets * 6.0 >= 2147483647.0)
+        return cm_fail(err, CM_ERR_RANGE, "%s: %d tetrahedra are too many for 10-node elements", m->source,
+                       m->n_tets);
+    size_t ne = (size_t)6 * (size_t)m->n_tets;
+    edge_rec *rec = malloc((ne ? ne : 1) * sizeof *rec);
+    m->tet_mid = malloc((ne ? ne : 1) * sizeof *m->tet_mid);
+    if (!rec || !m->tet_mid) {
+        free(rec);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: cannot allocate the edge table", m->source);
+    }
+    for (int e = 0; e < m->n_tets; e++)
+        for (int k = 0; k < 6; k++) {
+            int32_t a = m->tets[4 * e + fem_tet10_edges[k][0]], b = m->tets[4 * e + fem_tet10_edges[k][1]];
+            rec[6 * (size_t)e + (size_t)k] = (edge_rec){a < b ? a : b, a < b ? b : a, 6 * e + k};
+        }
+    qsort(rec, ne, sizeof *rec, edge_rec_cmp);
+    size_t n_edges = 0;
+    for (size_t i = 0; i < ne; i++)
+        n_edges += i == 0 || rec[i].lo != rec[i - 1].lo || rec[i].hi != rec[i - 1].hi;
+    if ((double)m->n_nodes + (double)n_edges >= 2147483647.0 / 3.0) {
+        free(rec);
+        return cm_fail(err, CM_ERR_RANGE, "%s: %zu edges: too many nodes for 10-node elements", m->source, n_edges);
+    }
+    int n_old = m->n_nodes, n_new = n_old + (int)n_edges;
+    double *x = realloc(m->x, (size_t)3 * (size_t)n_new * sizeof *x);
+    if (x)
+        m->x = x;
+    uint8_t *tag = x ? realloc(m->node_tag, (size_t)n_new) : NULL;
+    if (tag)
+        m->node_tag = tag;
+    int32_t *ijk = NULL;
+    if (tag && m->node_ijk) {
+        ijk = realloc(m->node_ijk, (size_t)3 * (size_t)n_new * sizeof *ijk);
+        if (ijk)
+            m->node_ijk = ijk;
+    }
+    if (!x || !tag || (m->node_ijk && !ijk)) {
+        free(rec);
+        return cm_fail(err, CM_ERR_NOMEM, "%s: cannot allocate %d mid-edge nodes", m->source, (int)n_edges);
+    }
+    int32_t node = n_old - 1;
+    for (size_t i = 0; i < ne; i++) {
+        const edge_rec *r = &rec[i];
+        if (i == 0 || r->lo != rec[i - 1].lo || r->hi != rec[i - 1].hi) {
+            node++;
+            const double *pa = &m->x[3 * r->lo], *pb = &m->x[3 * r->hi];
+            double *p = &m->x[3 * node];
+            if (g && m->node_ijk) {
+                double idx[3];
+                for (int a = 0; a < 3; a++) {
+                    double ia = m->node_ijk[3 * r->lo + a], ib = m->node_ijk[3 * r->hi + a];
+                    if (a == 0 && g->periodic_i && fabs(ia - ib) > 1.5) { /* across the seam: i = ni is i = 0 */
+                        if (ia < ib)
+                            ia += g->ni;
+                        else
+                            ib += g->ni;
+                    }
+                    idx[a] = 0.5 * (ia + ib);
+                }
+                g->map(g->ctx, idx[0], idx[1], idx[2], p);
+            } else {
+                for (int a = 0; a < 3; a++)
+                    p[a] = 0.5 * (pa[a] + pb[a]);
+            }
+            m->node_tag[node] = 0;
+            if (m->node_ijk)
+                m->node_ijk[3 * node] = m->node_ijk[3 * node + 1] = m->node_ijk[3 * node + 2] = -1;
+        }
+        m->tet_mid[r->slot] = node;
+    }
+    free(rec);
+    m->n_nodes = n_new;
+    int rc = fem_mesh_faces_quadratic(m, err);
+    if (rc)
+        return rc;
+    /* Tags: a mid-edge node is a rim node when its edge lies on a boundary
+     * face whose corners are all rim nodes (an edge through the body between
+     * two rim nodes is not on the rim). */
+    for (int f = 0; f < m->n_faces; f++) {
+        const int32_t *t = &m->faces[3 * f];
+        uint8_t common = m->node_tag[t[0]] & m->node_tag[t[1]] & m->node_tag[t[2]];
+        for (int k = 0; k < 3; k++)
+            m->node_tag[m->face_mid[3 * f + k]] |= common;
+    }
+    return CM_OK;
+}
+
+int fem_mesh_face_load(const fem_mesh *m, int f, double an[6][3], double a[6])
+{
+    int32_t nd[6];
+    int n = fem_mesh_face_nodes(m, f, nd);
+    if (n == 3) {
+        const double *p = &m->x[3 * nd[0]], *q = &m->x[3 * nd[1]], *r = &m->x[3 * nd[2]];
+        double e1[3] = {q[0] - p[0], q[1] - p[1], q[2] - p[2]}, e2[3] = {r[0] - p[0], r[1] - p[1], r[2] - p[2]};
+        double c[3] = {0.5 * (e1[1] * e2[2] - e1[2] * e2[1]), 0.5 * (e1[2] * e2[0] - e1[0] * e2[2]),
+                       0.5 * (e1[0] * e2[1] - e1[1] * e2[0])};
+        double A = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+        for (int k = 0; k < 3; k++) {
+            for (int d = 0; d < 3; d++)
+                an[k][d] = c[d] / 3.0;
+            a[k] = A / 3.0;
+        }
+        return 3;
+    }
+    /* 6-node triangle, x(s,t) = sum N_k x_k with L = (1-s-t, s, t); nodes
+     * c0 c1 c2 m01 m12 m20. Strang-Fix/Dunavant 6-point rule, degree 4
+     * (weights sum to 1, times the reference area 1/2). */
+    static const double qa[2] = {0.445948490915965, 0.091576213509771};
+    static const double qw[2] = {0.223381589678011, 0.109951743655322};
+    memset(an, 0, 6 * sizeof an[0]);
+    memset(a, 0, 6 * sizeof a[0]);
+    for (int g = 0; g < 6; g++) {
+        double u = qa[g / 3], L[3] = {u, u, u};
+        L[g % 3] = 1.0 - 2.0 * u;
+        double N[6] = {L[0] * (2 * L[0] - 1), L[1] * (2 * L[1] - 1), L[2] * (2 * L[2] - 1), 4 * L[0] * L[1],
+                       4 * L[1] * L[2], 4 * L[2] * L[0]};
+        /* dN/dL_i, then d/ds = d/dL1 - d/dL0, d/dt = d/dL2 - d/dL0 */
+        double dL[6][3] = {{4 * L[0] - 1, 0, 0}, {0, 4 * L[1] - 1, 0}, {0, 0, 4 * L[2] - 1},
+                           {4 * L[1], 4 * L[0], 0}, {0, 4 * L[2], 4 * L[1]}, {4 * L[2], 0, 4 * L[0]}};
+        double xs[3] = {0, 0, 0}, xt[3] = {0, 0, 0};
+        for (int k = 0; k < 6; k++)
+            for (int d = 0; d < 3; d++) {
+                xs[d] += (dL[k][1] - dL[k][0]) * m->x[3 * nd[k] + d];
+                xt[d] += (dL[k][2] - dL[k][0]) * m->x[3 * nd[k] + d];
+            }
+        double c[3] = {xs[1] * xt[2] - xs[2] * xt[1], xs[2] * xt[0] - xs[0] * xt[2], xs[0] * xt[1] - xs[1] * xt[0]};
+        double J = sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]), w = 0.5 * qw[g / 3];
+        for (int k = 0; k < 6; k++) {
+            for (int d = 0; d < 3; d++)
+                an[k][d] += w * N[k] * c[d];
+            a[k] += w * N[k] * J;
+        }
+    }
+    return 6;
 }

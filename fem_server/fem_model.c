@@ -36,6 +36,16 @@ void fem_load_pressure(const fem_mesh *m, uint8_t tag, double p, double *f)
     for (int k = 0; k < m->n_faces; k++) {
         if (!(m->face_tag[k] & tag))
             continue;
+        if (m->face_mid) { /* 6-node face: -p int N_k n dA per node */
+            int32_t nd[6];
+            double an[6][3], a[6];
+            int n = fem_mesh_face_nodes(m, k, nd);
+            fem_mesh_face_load(m, k, an, a);
+            for (int q = 0; q < n; q++)
+                for (int d = 0; d < 3; d++)
+                    f[3 * nd[q] + d] -= p * an[q][d];
+            continue;
+        }
         const int32_t *t = &m->faces[3 * k];
         const double *a = &m->x[3 * t[0]], *b = &m->x[3 * t[1]], *c = &m->x[3 * t[2]];
         double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
@@ -74,12 +84,20 @@ static int build_interface(fem_model *m, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "fem: out of memory");
     for (int i = 0; i < me->n_nodes; i++)
         map[i] = -1;
+    /* A 6-node face of 10-node elements is given to the DEM as four linear
+     * triangles (corner, mid, mid) x 3 and (mid, mid, mid), all oriented as
+     * the face: the DEM sees linear triangles only, and its forces go to the
+     * corner and mid-edge nodes by eq. 42 on the sub-triangle. */
+    static const int sub[4][3] = {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
+    const uint32_t per_face = me->face_mid ? 4u : 1u;
     uint32_t nt = 0;
     for (int f = 0; f < me->n_faces; f++)
         if (me->face_tag[f] & FEM_FACE_CONTACT) {
-            nt++;
-            for (int q = 0; q < 3; q++)
-                map[me->faces[3 * f + q]] = 0;
+            int32_t nd[6];
+            int n = fem_mesh_face_nodes(me, f, nd);
+            nt += per_face;
+            for (int q = 0; q < n; q++)
+                map[nd[q]] = 0;
         }
     uint32_t nn = 0;
     for (int i = 0; i < me->n_nodes; i++) /* ascending node id: compact and stable */
@@ -100,9 +118,13 @@ static int build_interface(fem_model *m, cm_error *err)
     uint32_t t = 0;
     for (int f = 0; f < me->n_faces; f++)
         if (me->face_tag[f] & FEM_FACE_CONTACT) {
-            for (int q = 0; q < 3; q++)
-                m->if_tris[3 * t + q] = (uint32_t)map[me->faces[3 * f + q]];
-            t++;
+            int32_t nd[6];
+            fem_mesh_face_nodes(me, f, nd);
+            for (uint32_t s = 0; s < per_face; s++) {
+                for (int q = 0; q < 3; q++)
+                    m->if_tris[3 * t + (uint32_t)q] = (uint32_t)map[nd[per_face == 1 ? q : sub[s][q]]];
+                t++;
+            }
         }
     free(map);
     if (nn == 0)
@@ -123,13 +145,19 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     int rc;
     switch (cfg->mesh) {
     case FEM_MESH_TIRE:
-        rc = fem_mesh_tire(&cfg->tire, &m->mesh, err);
+        rc = fem_mesh_tire_order(&cfg->tire, cfg->element == FEM_ELEMENT_TET10 ? 2 : 1, &m->mesh, err);
         break;
     case FEM_MESH_GMSH:
         rc = fem_mesh_read_gmsh(cfg->gmsh_path, &m->mesh, err);
+        if (!rc && cfg->element == FEM_ELEMENT_TET10 && !m->mesh.tet_mid)
+            rc = fem_mesh_make_quadratic(&m->mesh, NULL, err); /* straight edges */
+        else if (!rc && cfg->element == FEM_ELEMENT_TET4 && m->mesh.tet_mid)
+            rc = cm_fail(err, CM_ERR_RANGE, "%s: second-order tetrahedra need fem.element = \"tet10\"",
+                         cfg->gmsh_path);
         break;
     default:
-        rc = fem_mesh_box(cfg->box_size, cfg->box_cells, &m->mesh, err);
+        rc = fem_mesh_box_order(cfg->box_size, cfg->box_cells, cfg->element == FEM_ELEMENT_TET10 ? 2 : 1, &m->mesh,
+                                err);
         break;
     }
     if (rc)
@@ -523,7 +551,39 @@ int fem_check_elements(const fem_model *m, cm_error *err)
         return CM_OK;
     const fem_mesh *mesh = &m->mesh;
     const double *u = m->s->u;
-    for (int e = 0; e < mesh->n_tets; e++) {
+    for (int e = 0; e < mesh->n_tets && mesh->tet_mid; e++) {
+        /* 10-node elements: det J of X + u and the strain at each quadrature point */
+        int32_t t[10];
+        double X[10][3], x[10][3], ue[10][3], g[10][3], eps[6];
+        fem_mesh_tet_nodes(mesh, e, t);
+        for (int i = 0; i < 10; i++)
+            for (int a = 0; a < 3; a++) {
+                X[i][a] = mesh->x[3 * t[i] + a];
+                ue[i][a] = u[3 * t[i] + a];
+                x[i][a] = X[i][a] + ue[i][a];
+            }
+        for (int q = 0; q < FEM_TET10_GAUSS; q++) {
+            double det0 = fem_tet10_gradients(X, fem_tet10_gauss_L[q], g);
+            fem_tet10_strain(g, ue, eps);
+            double emax = 0.0;
+            for (int k = 0; k < 6; k++)
+                emax = fabs(eps[k]) > emax || eps[k] != eps[k] ? fabs(eps[k]) : emax;
+            double det = fem_tet10_gradients(x, fem_tet10_gauss_L[q], g);
+            if (!(det > 0.0))
+                return cm_fail(err, CM_ERR_NUMERIC,
+                               "fem: 10-node element %d inverted at quadrature point %d (det J %.3g of its initial "
+                               "%.3g) at t = %.6g s (step %ld): the tire is crushed or its integration is unstable; "
+                               "lower fem.dt or coupling.dt, or stiffen fem.material.E",
+                               e, q + 1, det, det0, m->s->time, m->s->steps);
+            if (!(emax <= m->cfg.max_strain))
+                return cm_fail(err, CM_ERR_NUMERIC,
+                               "fem: element %d stretched to a strain of %.3g (fem.max_strain = %.3g) at t = %.6g s "
+                               "(step %ld): far outside linear elasticity, the integration is unstable or the load "
+                               "too high; lower fem.dt or coupling.dt, or raise fem.max_strain if this is meant",
+                               e, emax, m->cfg.max_strain, m->s->time, m->s->steps);
+        }
+    }
+    for (int e = 0; e < mesh->n_tets && !mesh->tet_mid; e++) {
         const int32_t *t = &mesh->tets[4 * e];
         double x[4][3], ue[4][3], grad[4][3], eps[6];
         for (int i = 0; i < 4; i++)

@@ -56,8 +56,9 @@ void fem_model_build_load(fem_model *m, const double *f_iface);
 
 /* Element guard: fails, naming the element, the time and step and the
  * setting to change, on the first tetrahedron of the current configuration
- * X + u that is inverted (signed volume <= 0) or stretched beyond
- * cfg.max_strain (largest |component| of its small strain). O(n_tets), no
+ * X + u that is inverted (signed volume <= 0; 10-node elements: det J <= 0
+ * at a quadrature point) or stretched beyond cfg.max_strain (largest
+ * |component| of its small strain, at each quadrature point for tet10). O(n_tets), no
  * allocation; fem_advance calls it every 10 cfg.check_every intervals. */
 int fem_check_elements(const fem_model *m, cm_error *err);
 

@@ -59,7 +59,8 @@ int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double
 
     /* Element loop: upper triangle of each K_e into one triplet matrix;
      * cholmod_triplet_to_sparse sums the duplicates (the assembly). */
-    size_t nz = (size_t)m->n_tets * 78u;
+    bool quad = m->tet_mid != NULL;
+    size_t nz = (size_t)m->n_tets * (quad ? 465u : 78u);
     cholmod_triplet *T = cholmod_allocate_triplet(n, n, nz, 1, CHOLMOD_REAL, &s->cc);
     if (!T) {
         int rc = cholmod_failed(s, err, "allocate_triplet");
@@ -69,7 +70,35 @@ int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double
     int *Ti = T->i, *Tj = T->j;
     double *Tx = T->x;
     size_t k = 0;
-    for (int e = 0; e < m->n_tets; e++) {
+    for (int e = 0; e < m->n_tets && quad; e++) {
+        int32_t t[10];
+        double xe[10][3], Ke[30][30], V;
+        fem_mesh_tet_nodes(m, e, t);
+        for (int i = 0; i < 10; i++)
+            memcpy(xe[i], &m->x[3 * t[i]], sizeof xe[i]);
+        int bad = fem_tet10_stiffness(xe, s->lambda, s->mu, Ke, &V);
+        if (bad || !(V > 0.0)) {
+            cholmod_free_triplet(&T, &s->cc);
+            fem_solver_destroy(&s);
+            return cm_fail(err, CM_ERR_NUMERIC, "%s: 10-node element %d has det J <= 0 at Gauss point %d "
+                           "(distorted or inverted)", m->source, e, bad);
+        }
+        /* HRZ lumped mass (fem_element.h): corners 1/36, mid-edge 4/27 */
+        for (int i = 0; i < 10; i++)
+            for (int a = 0; a < 3; a++)
+                s->mass[3 * t[i] + a] += (i < 4 ? FEM_TET10_MASS_CORNER : FEM_TET10_MASS_MID) * rho * V;
+        for (int p = 0; p < 30; p++) {
+            int gp = 3 * t[p / 3] + p % 3;
+            for (int q = p; q < 30; q++) {
+                int gq = 3 * t[q / 3] + q % 3;
+                Ti[k] = gp < gq ? gp : gq;
+                Tj[k] = gp < gq ? gq : gp;
+                Tx[k] = Ke[p][q];
+                k++;
+            }
+        }
+    }
+    for (int e = 0; e < m->n_tets && !quad; e++) {
         const int32_t *t = &m->tets[4 * e];
         double g[4][3], Ke[12][12];
         double V = fem_tet_gradients(&m->x[3 * t[0]], &m->x[3 * t[1]], &m->x[3 * t[2]], &m->x[3 * t[3]], g);
@@ -418,6 +447,9 @@ int fem_solver_use_neo_hookean(fem_solver *s, const fem_mesh *m, cm_error *err)
 {
     if (s->integrator == FEM_INTEGRATOR_NEWMARK)
         return cm_fail(err, CM_ERR_STATE, "fem solver: Neo-Hookean rubber needs the explicit integrator");
+    if (m->tet_mid)
+        return cm_fail(err, CM_ERR_STATE, "%s: fem.material.model = \"neo_hookean\" is implemented for "
+                       "fem.element = \"tet4\" only", m->source);
     size_t nt = (size_t)m->n_tets;
     s->tets = malloc(4 * nt * sizeof *s->tets);
     s->grad0 = malloc(nt * sizeof *s->grad0);

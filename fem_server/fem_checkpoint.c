@@ -83,6 +83,7 @@ int fem_checkpoint_write(const char *dir, fem_model *m, fem_ckpt_run *run, uint6
     if (cm_ckpt_begin_write(&ck, dir, "fem", run->exchange, err) == CM_OK) {
         cm_ckpt_same_u64(&ck, "/scene_hash", scene_hash, "the scene file or its --set overrides");
         visit_model(&ck, m);
+        m->s->ku_valid = 0; /* u replaced */
         visit_run(&ck, run);
         long rows = m->out ? fem_output_rows(m->out) : 0;
         cm_ckpt_long(&ck, "/output/fem_series_rows", &rows);

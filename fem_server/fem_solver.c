@@ -51,8 +51,9 @@ int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double
     s->f = calloc(n, sizeof(double));
     s->w = calloc(n, sizeof(double));
     s->tmp = calloc(n, sizeof(double));
+    s->ku = calloc(n, sizeof(double));
     if (!s->mass || !s->inv_mass || !s->fixed || !s->u_fixed || !s->free_dofs || !s->u || !s->v || !s->a ||
-        !s->f || !s->w || !s->tmp) {
+        !s->f || !s->w || !s->tmp || !s->ku) {
         fem_solver_destroy(&s);
         return cm_fail(err, CM_ERR_NOMEM, "fem solver: out of memory for %d dofs", (int)n);
     }
@@ -176,6 +177,7 @@ void fem_solver_destroy(fem_solver **ps)
     free(s->f);
     free(s->w);
     free(s->tmp);
+    free(s->ku);
     free(s->tets);
     free(s->grad0);
     free(s->vol0);
@@ -348,6 +350,7 @@ done:
 int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
                       double *u, int *iters, cm_error *err)
 {
+    s->ku_valid = 0;
     /* K u = b with u = u_c on fixed dofs: K_ff du_f = b_f - (K u_c)_f */
     double *r = s->w;
     fem_solver_matvec(s, s->u_fixed, s->tmp);
@@ -505,6 +508,7 @@ static void add_beta_k(const fem_solver *s, const double *x, double *y)
 
 void fem_solver_set_state(fem_solver *s, const double *u, const double *v)
 {
+    s->ku_valid = 0;
     for (int d = 0; d < s->n_dof; d++) {
         s->u[d] = s->fixed[d] ? s->u_fixed[d] : (u ? u[d] : 0.0);
         s->v[d] = s->fixed[d] || !v ? 0.0 : v[d];
@@ -603,15 +607,18 @@ static void step_explicit(fem_solver *s, double h)
     }
     const int *Kp = s->K->p, *Ki = s->K->i;
     const double *Kx = s->K->x;
+    double *kw = s->ku;
     FEM_OMP_FOR
     for (int r = 0; r < n; r++) {
         double ku = 0.0;
         for (int p = Kp[r]; p < Kp[r + 1]; p++)
             ku += Kx[p] * w[Ki[p]];
+        kw[r] = ku;
         double ar = im[r] * (f[r] - ku) - (im[r] != 0.0 ? alpha * v[r] : 0.0); /* eq. 32 */
         a[r] = ar;
         v[r] += hh * ar;
     }
+    s->ku_valid = beta == 0.0; /* w is u: kw is K u, the same sums as fem_solver_matvec */
 }
 
 /* Newmark average acceleration in increments: with du = u+ - u,
@@ -645,6 +652,7 @@ static int step_newmark(fem_solver *s, double h, cm_error *err)
 int fem_solver_step(fem_solver *s, double h, cm_error *err)
 {
     int rc = CM_OK;
+    s->ku_valid = 0; /* step_explicit sets it again where it leaves K u */
     switch (s->integrator) {
     case FEM_INTEGRATOR_EXPLICIT:
         step_explicit(s, h);
@@ -680,10 +688,14 @@ double fem_solver_elastic_energy(const fem_solver *s)
         }
         return acc;
     }
-    fem_solver_matvec(s, s->u, s->tmp);
+    const double *ku = s->ku;
+    if (!s->ku_valid) { /* the explicit step did not leave it: the product */
+        fem_solver_matvec(s, s->u, s->tmp);
+        ku = s->tmp;
+    }
     double acc = 0.0;
     for (int d = 0; d < s->n_dof; d++)
-        acc += s->u[d] * s->tmp[d];
+        acc += s->u[d] * ku[d];
     return 0.5 * acc;
 }
 

@@ -36,6 +36,9 @@ typedef struct fem_solver {
     double *u, *v, *a;     /* state per dof (rim frame) */
     double *f;             /* current total load per dof [N]: set by the caller */
     double *w, *tmp;       /* work vectors */
+    double *ku;            /* K u of the current u, left by the linear explicit step without stiffness damping
+                              (its internal forces): the elastic energy reads it instead of a product */
+    int ku_valid;          /* ku belongs to the current u (cleared by anything else that sets u) */
     double time;
     long steps;
     /* Neo-Hookean rubber (fem_solver_use_neo_hookean; explicit only): the

@@ -674,12 +674,26 @@ void cm_scene_clear_overrides(void) { g_n_overrides = 0; }
 
 uint64_t cm_scene_overrides_hash(uint64_t h)
 {
-    for (int i = 0; i < g_n_overrides; i++)
+    /* settings that cannot change a result stay out: a run may be resumed
+     * with another DEM thread count (the same bits for any, see dem_pairs.c) */
+    static const char *const neutral[] = {"dem.threads"};
+    for (int i = 0; i < g_n_overrides; i++) {
+        int skip = 0;
+        for (size_t k = 0; k < sizeof neutral / sizeof *neutral; k++) {
+            size_t n = strlen(neutral[k]);
+            const char *o = g_overrides[i];
+            while (*o == ' ')
+                o++;
+            skip |= strncmp(o, neutral[k], n) == 0 && (o[n] == '=' || o[n] == ' ');
+        }
+        if (skip)
+            continue;
         for (const unsigned char *c = (const unsigned char *)g_overrides[i];; c++) {
             h ^= *c; /* the terminating 0 separates the assignments */
             h *= 1099511628211ULL;
             if (!*c)
                 break;
         }
+    }
     return h;
 }

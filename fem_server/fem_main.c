@@ -21,7 +21,6 @@
  * interrupted (SIGINT/SIGTERM; the run then ends cleanly). */
 #include <errno.h>
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -37,22 +36,13 @@
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
+#include "signals.h"
 #include "fem_summary.h" /* [traction] */
 #include "timer.h"
 
-/* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
- * is checkpointed and the run ends cleanly (g_interrupt); before that, or if
- * that has not ended the run within 10 s, everything stops at once (g_stop). */
-static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
-static void on_signal(int sig)
-{
-    if (!g_interrupt && g_graceful)
-        alarm(10);
-    g_interrupt = sig;
-    if (!g_graceful)
-        g_stop = sig;
-}
-static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
+/* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
+ * or stop at once before the exchange loop or 10 s later). */
+static cm_signal_flags *g_sig;
 
 typedef struct options {
     const char *scene, *shm, *out, *export_mesh, *resume;
@@ -256,7 +246,7 @@ static int run(const options *o)
     c.scene_hash = scene_hash;
     c.interval = cm_run_exchange_dt(&rc_cfg);
     c.hooks = (fem_exchange_hooks){.after_advance = after_advance, .user = NULL};
-    c.interrupt = &g_interrupt;
+    c.interrupt = &g_sig->interrupt;
     fem_energy en0;
     fem_get_energy(model, &en0);
     c.elastic0 = en0.elastic; /* the inflated tire before any grain touches it */
@@ -273,7 +263,7 @@ static int run(const options *o)
     def.exchange_dt = c.interval;
     def.stall_timeout = rc_cfg.stall_timeout;
     def.connect_timeout = rc_cfg.connect_timeout;
-    def.stop_flag = &g_stop;
+    def.stop_flag = &g_sig->stop;
     char ipc_err[512];
     if ((rc = ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err))) {
         cm_log_error("%s", ipc_err);
@@ -292,8 +282,8 @@ static int run(const options *o)
     memcpy(c.x_prev, ipc_surface_nodes(ch), 3 * (size_t)c.nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", c.nn, nt, o->shm);
     if ((rc = ipc_accept(ch))) {
-        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
-            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_stop);
+        if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_sig->stop);
         else
             cm_log_error("%s", ipc_error(ch));
         exit_code = 3;
@@ -344,23 +334,21 @@ static int run(const options *o)
      * finishes the run (fem_exchange.c has the stages). */
     c.last_progress = c.loop_t0 = cm_now();
     c.n_first = c.n;
-    g_graceful = 1; /* from here a signal asks for a checkpoint */
-    if (g_interrupt)
-        alarm(10);
+    cm_signals_graceful(1); /* from here a signal asks for a checkpoint */
     fem_exchange_status st;
     while ((st = fem_exchange(&c, &err)) == FEM_EXCHANGE_NEXT)
         ;
-    g_graceful = 0;
+    cm_signals_graceful(0);
     if (st == FEM_EXCHANGE_FAILED)
         goto fail;
     if (st == FEM_EXCHANGE_LINK_LOST) {
         cm_log_error("%s", ipc_error(ch));
-        exit_code = g_stop ? 128 + (int)g_stop : 3;
+        exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
         goto cleanup;
     }
     if ((rc = finish_run(o, &c, h5, cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0, &err)))
         goto fail;
-    exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+    exit_code = g_sig->interrupt ? 128 + (int)g_sig->interrupt : 0;
     clean_stop = 1;
     goto cleanup;
 
@@ -438,13 +426,7 @@ int main(int argc, char **argv)
     }
     cm_log_set_tag("fem");
     cm_h5_library_init();
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
+    g_sig = cm_signals_install();
     if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

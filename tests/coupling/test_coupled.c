@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "proc.h"
+#include "hertz.h"
 #include "test.h"
 
 #if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR) || !defined(PLATE_PEER_PATH)
@@ -90,11 +91,10 @@ typedef struct hertz {
 static hertz hertz_sphere_plane(double r, double rho, double E1, double nu1, double E2, double nu2, double v)
 {
     hertz h;
-    h.m = rho * 4.0 / 3.0 * M_PI * r * r * r;
-    h.estar = 1.0 / ((1 - nu1 * nu1) / E1 + (1 - nu2 * nu2) / E2);
-    h.dmax = pow(15.0 * h.m * v * v / (16.0 * h.estar * sqrt(r)), 0.4);
-    h.tc = 2.943 * h.dmax / v; /* 2.9432 to four digits */
-    h.fmax = 4.0 / 3.0 * h.estar * sqrt(r) * pow(h.dmax, 1.5);
+    h.m = sphere_mass(rho, r);
+    h.estar = hertz_e_star(E1, nu1, E2, nu2);
+    const hertz_ref c = hertz_closed_form(h.estar, r, h.m, v);
+    h.dmax = c.dmax, h.tc = c.tc, h.fmax = c.fmax;
     return h;
 }
 

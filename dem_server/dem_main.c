@@ -242,6 +242,7 @@ static int run(const options *o)
     ipc_channel *ch = NULL;
     dem_window *window = NULL;
     output_ctx octx = {0};
+    char dem_path[1100] = ""; /* the checkpoint to resume from: octx.resume_path, for the whole run */
     cm_run_config rcfg;
     dem_config cfg;
     int surface_material = 0, exit_code = 1, rc;
@@ -296,7 +297,6 @@ static int run(const options *o)
     octx.scene_hash = cm_scene_overrides_hash(octx.scene_hash);
     if (o->resume) {
         char fem_path[1100];
-        static char dem_path[1100];
         if ((rc = cm_ckpt_choose(o->resume, &octx.resume_exchange, dem_path, fem_path, sizeof dem_path, &err)))
             goto fail;
         octx.resume_path = dem_path;

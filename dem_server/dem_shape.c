@@ -2,6 +2,7 @@
  * narrow phase and the contacts of shaped grains (see dem_shape.h). */
 #include "dem_shape.h"
 
+#include <assert.h>
 #include <ccd/ccd.h>
 #include <math.h>
 #include <stdlib.h>
@@ -783,6 +784,19 @@ static int smooth_refine(const dem_body *bi, const dem_body *bj, double *depth, 
     return *depth > 0.0;
 }
 
+/* Penetration of grain body b into a by MPR, for the pair kernels: 1 in
+ * contact, 0 apart. libccd's MPR has no failure code (ccd.h: 0 intersect,
+ * -1 apart; only GJK+EPA can fail, -2 on allocation, and the kernels do not
+ * use it), so dem_body_penetration's "< 0" cannot come from here: a libccd
+ * that changed this is caught in debug builds (the sanitizer CI build) rather
+ * than read as "apart". */
+static int grains_penetrate(const dem_body *a, const dem_body *b, double *depth, double n[3], double p[3])
+{
+    const int rc = dem_body_penetration(a, b, 0, depth, n, p);
+    assert(rc >= 0 && "libccd's MPR returned a failure code (ccd.h documents 0 or -1)");
+    return rc == 1;
+}
+
 int dem_shaped_pair(dem_world *w, int i, int j, double *xi, double *fx, double *fy, double *fz, double *tx,
                     double *ty, double *tz)
 {
@@ -805,7 +819,7 @@ int dem_shaped_pair(dem_world *w, int i, int j, double *xi, double *fx, double *
         dem_grain_body(w, i, origin, inv_l, &bi);
         dem_grain_body(w, j, origin, inv_l, &bj);
         /* obj1 = j, obj2 = i: n points from j to i (eq. 10) */
-        in = dem_body_penetration(&bj, &bi, 0, &depth, n, pc) == 1;
+        in = grains_penetrate(&bj, &bi, &depth, n, pc);
     }
     if (in && bi.type != DEM_BODY_POLY && bj.type != DEM_BODY_POLY)
         in = smooth_refine(&bi, &bj, &depth, n);
@@ -870,7 +884,7 @@ int dem_shaped_pair_touch(const dem_world *w, int i, int j)
     dem_body bi, bj;
     dem_grain_body(w, i, origin, 1.0 / L, &bi);
     dem_grain_body(w, j, origin, 1.0 / L, &bj);
-    return dem_body_penetration(&bj, &bi, 0, &depth, n, pc) == 1;
+    return grains_penetrate(&bj, &bi, &depth, n, pc);
 }
 
 /* Shaped grain against a plane: closed form, no libccd.

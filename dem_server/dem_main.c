@@ -30,6 +30,7 @@
 #include "h5io.h"
 #include "log.h"
 #include "runcfg.h"
+#include "runrec.h"
 #include "signals.h"
 #include "scene.h"
 #include "timer.h"
@@ -247,6 +248,9 @@ static int run(const options *o)
     dem_config cfg;
     int surface_material = 0, exit_code = 1, rc;
     dem_coupled_profile cprof = {0};
+    cm_run_record rec = {0}; /* dem_run.json: what scripts read of this run (common/runrec.h) */
+    cm_runrec_text(&rec, "program", "dem_server");
+    cm_runrec_text(&rec, "scene", o->scene);
 
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
         (rc = dem_config_read(scene, &cfg, &err)))
@@ -346,6 +350,13 @@ static int run(const options *o)
     dem_time_limits(w, &t_rayleigh, &t_hertz);
     cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s)", dem_grain_count(w),
                 rcfg.dt, t_rayleigh, t_hertz);
+    cm_runrec_num(&rec, "grains", dem_grain_count(w));
+    cm_runrec_num(&rec, "dt", rcfg.dt);
+    cm_runrec_num(&rec, "exchange_every", rcfg.exchange_every);
+    cm_runrec_num(&rec, "t_rayleigh", t_rayleigh);
+    cm_runrec_num(&rec, "t_hertz", t_hertz);
+    cm_runrec_num(&rec, "dt_safety_rayleigh", cfg.world.dt_safety_rayleigh);
+    cm_runrec_num(&rec, "dt_safety_hertz", cfg.world.dt_safety_hertz);
 
     if (o->standalone) {
         long steps = (long)(rcfg.end_time / rcfg.dt + 0.5);
@@ -403,6 +414,17 @@ fail:
     exit_code = 1;
 cleanup:
     ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
+    if (o->out) {
+        char path[1100];
+        snprintf(path, sizeof path, "%s/dem_run.json", o->out);
+        cm_runrec_num(&rec, "exchanges", (double)cprof.exchanges);
+        cm_runrec_num(&rec, "exit_code", exit_code);
+        cm_runrec_num(&rec, "signal", g_sig->stop ? g_sig->stop : g_sig->interrupt);
+        cm_runrec_text(&rec, "error", exit_code != 0 ? err.msg : "");
+        cm_error rerr = {0};
+        if (cm_runrec_write(&rec, path, &rerr))
+            cm_log_warn("%s", rerr.msg);
+    }
     dem_output_close(&octx.out);
     dem_window_free(&window);
     dem_world_destroy(&w);
@@ -413,7 +435,7 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
-                    "                  [--resume DIR] [--set KEY=VALUE]... [--print-config]\n"
+                    "                  [--resume DIR] [--set KEY=VALUE]... [--print-config[=json]]\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");
     return 2;
@@ -439,6 +461,8 @@ int main(int argc, char **argv)
             o.standalone = 1;
         else if (strcmp(a, "--print-config") == 0)
             print_config = 1;
+        else if (strcmp(a, "--print-config=json") == 0)
+            print_config = 2;
         else if (strcmp(a, "--set") == 0 && v) {
             cm_error err = {0};
             if (cm_scene_add_override(v, &err)) {
@@ -451,7 +475,7 @@ int main(int argc, char **argv)
     }
     if (o.scene && print_config) { /* the resolved scene (file + --set), common/scene.h */
         cm_error err = {0};
-        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+        if (cm_scene_print_config(o.scene, print_config == 2, stdout, &err) == CM_OK)
             return 0;
         fprintf(stderr, "dem_server: %s\n", err.msg);
         return 1;

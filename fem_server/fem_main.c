@@ -2,7 +2,7 @@
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
- *   fem_server --scene FILE --print-config           the resolved scene (file + --set), then exit
+ *   fem_server --scene FILE --print-config[=json]    the resolved scene (file + --set), then exit
  *   fem_server --scene FILE --fem-only [--out DIR]   the tire model alone (fem.supports, fem.loads)
  *   --resume DIR: continue the run of DIR from its last checkpoint
  *
@@ -36,6 +36,7 @@
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
+#include "runrec.h"
 #include "signals.h"
 #include "fem_summary.h" /* [traction] */
 #include "timer.h"
@@ -168,6 +169,10 @@ static int run(const options *o)
     cm_h5 *h5 = NULL;
     fem_coupled c = {0};
     int exit_code = 1, rc, clean_stop = 0;
+    const char *peer_msg = NULL; /* what stopped the run when the link to the peer did */
+    cm_run_record rec = {0};     /* fem_run.json: what scripts read of this run (common/runrec.h) */
+    cm_runrec_text(&rec, "program", "fem_server");
+    cm_runrec_text(&rec, "scene", o->scene);
 
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
@@ -219,6 +224,11 @@ static int run(const options *o)
     cm_log_info("tire: %d nodes, %d tetrahedra; static solve done in %.2f s; FEM step limit %.3g s "
                 "(estimate h/c %.3g s)",
                 n_mesh_nodes, n_tets, cm_now() - t0, stab.dt_limit, stab.dt_estimate);
+    cm_runrec_num(&rec, "nodes", n_mesh_nodes);
+    cm_runrec_num(&rec, "tets", n_tets);
+    cm_runrec_num(&rec, "dt", cfg.dt);
+    cm_runrec_num(&rec, "dt_limit", stab.dt_limit);
+    cm_runrec_num(&rec, "dt_estimate", stab.dt_estimate);
 
     double mesh_mass, mesh_inertia;
     fem_mass_properties(model, &mesh_mass, &mesh_inertia);
@@ -267,6 +277,7 @@ static int run(const options *o)
     char ipc_err[512];
     if ((rc = ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err))) {
         cm_log_error("%s", ipc_err);
+        peer_msg = ipc_err;
         exit_code = 3;
         goto cleanup;
     }
@@ -285,7 +296,7 @@ static int run(const options *o)
         if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
             cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_sig->stop);
         else
-            cm_log_error("%s", ipc_error(ch));
+            cm_log_error("%s", peer_msg = ipc_error(ch));
         exit_code = 3;
         goto cleanup;
     }
@@ -342,7 +353,7 @@ static int run(const options *o)
     if (st == FEM_EXCHANGE_FAILED)
         goto fail;
     if (st == FEM_EXCHANGE_LINK_LOST) {
-        cm_log_error("%s", ipc_error(ch));
+        cm_log_error("%s", peer_msg = ipc_error(ch));
         exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
         goto cleanup;
     }
@@ -360,6 +371,17 @@ fail:
 cleanup:
     if (h5 && cm_h5_close(&h5, &err))
         cm_log_error("%s", err.msg);
+    if (!o->export_mesh) {
+        char rec_path[1100];
+        snprintf(rec_path, sizeof rec_path, "%s/fem_run.json", o->out);
+        cm_runrec_num(&rec, "exchanges", (double)c.n);
+        cm_runrec_num(&rec, "exit_code", exit_code);
+        cm_runrec_num(&rec, "signal", g_sig->stop ? g_sig->stop : g_sig->interrupt);
+        cm_runrec_text(&rec, "error", exit_code == 0 ? "" : peer_msg ? peer_msg : err.msg);
+        cm_error rerr = {0};
+        if (cm_runrec_write(&rec, rec_path, &rerr))
+            cm_log_warn("%s", rerr.msg);
+    }
     /* interrupted but finished cleanly (checkpoint written, finish answered): not a failure for the peer */
     ipc_close(&ch, exit_code == 0 || clean_stop ? IPC_OK : IPC_ERR_PEER_FAILED);
     fem_destroy(&model);
@@ -373,14 +395,15 @@ static int usage(void)
 {
     fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
-                    "       fem_server --scene FILE [--set KEY=VALUE]... --print-config\n"
+                    "       fem_server --scene FILE [--set KEY=VALUE]... --print-config[=json]\n"
                     "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
                     "  with the physical groups rim, cavity and contact, and exits.\n"
                     "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n"
                     "  --print-config prints the scene as resolved (the file with every --set applied) in\n"
-                    "  libconfig syntax on stdout and exits: scripts read settings from it.\n"
+                    "  libconfig syntax on stdout and exits; --print-config=json prints it as JSON, which\n"
+                    "  scripts read (bench/post/runio.py) instead of parsing libconfig.\n"
                     "  --fem-only runs the tire model alone, no DEM peer: the static solve under\n"
                     "  fem.supports and fem.loads, or with fem.analysis = \"dynamic\" the response\n"
                     "  from rest to run.end_time; results in DIR/fem.h5 and DIR/fem_series.csv.\n");
@@ -402,6 +425,8 @@ int main(int argc, char **argv)
             o.resume = o.out = argv[++i];
         else if (strcmp(argv[i], "--print-config") == 0)
             o.print_config = 1;
+        else if (strcmp(argv[i], "--print-config=json") == 0)
+            o.print_config = 2;
         else if (strcmp(argv[i], "--fem-only") == 0)
             o.fem_only = 1;
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
@@ -419,7 +444,7 @@ int main(int argc, char **argv)
         return usage();
     if (o.print_config) { /* the scene as resolved: file + --set, libconfig syntax */
         cm_error err = {0};
-        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+        if (cm_scene_print_config(o.scene, o.print_config == 2, stdout, &err) == CM_OK)
             return 0;
         fprintf(stderr, "fem_server: %s\n", err.msg);
         return 1;

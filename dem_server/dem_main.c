@@ -385,7 +385,7 @@ static int run(const options *o)
         rc = dem_run_coupled(w, ch, &def, &hooks, &err);
         cm_signals_graceful(0);
         ch = NULL; /* closed by the run */
-        if (rc == DEM_COUPLED_PEER) {
+        if (rc == CM_ERR_PEER) {
             cm_log_error("%s", err.msg);
             exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
             goto cleanup;

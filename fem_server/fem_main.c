@@ -275,7 +275,7 @@ static int run(const options *o)
     def.connect_timeout = rc_cfg.connect_timeout;
     def.stop_flag = &g_sig->stop;
     char ipc_err[512];
-    if ((rc = ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err))) {
+    if (ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err)) { /* ipc.h codes: not mixed into rc */
         cm_log_error("%s", ipc_err);
         peer_msg = ipc_err;
         exit_code = 3;
@@ -292,7 +292,7 @@ static int run(const options *o)
     fem_interface_masses(model, ipc_surface_masses(ch));
     memcpy(c.x_prev, ipc_surface_nodes(ch), 3 * (size_t)c.nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", c.nn, nt, o->shm);
-    if ((rc = ipc_accept(ch))) {
+    if (ipc_accept(ch)) {
         if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
             cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_sig->stop);
         else

@@ -81,6 +81,7 @@ static int run(const options *o)
     cm_run_config rcfg;
     scm_config cfg;
     int rc, exit_code = 1;
+    int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, apart from rc (common/error.h codes) */
 
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
         (rc = scm_config_read(scene, &cfg, &err)))
@@ -155,7 +156,7 @@ static int run(const options *o)
         double t0 = cm_now();
         ipc_frame_head *out;
         double *p;
-        if ((rc = ipc_send_begin(ch, &out, &p)))
+        if ((ipc_rc = ipc_send_begin(ch, &out, &p)))
             break;
         out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
         out->time = time;
@@ -182,11 +183,11 @@ static int run(const options *o)
                 cm_log_info("interrupted: asking the FEM side to stop after exchange %ld", n);
             }
         }
-        if ((rc = ipc_send_commit(ch)))
+        if ((ipc_rc = ipc_send_commit(ch)))
             break;
         const ipc_frame_head *in;
         const double *q;
-        if ((rc = ipc_recv(ch, &in, &q)))
+        if ((ipc_rc = ipc_recv(ch, &in, &q)))
             break;
         const uint32_t kind = in->kind, flags = in->flags;
         stop_requested |= (flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
@@ -200,7 +201,7 @@ static int run(const options *o)
         if (kind == IPC_FRAME_FINISH)
             break;
         if (kind != IPC_FRAME_DATA) {
-            rc = cm_fail(&err, CM_ERR_STATE, "unexpected frame kind %u from the FEM side at exchange %ld", kind, n);
+            rc = cm_fail(&err, CM_ERR_PEER, "unexpected frame kind %u from the FEM side at exchange %ld", kind, n);
             goto fail;
         }
         for (size_t k = 0; k < m; k++)
@@ -225,7 +226,7 @@ static int run(const options *o)
                         time, (double)(n + 1) / (now - t_start), tot.contacts, tot.force[2], 1e3 * tot.max_sinkage);
         }
     }
-    if (rc) {
+    if (ipc_rc) { /* ipc's code: its message names the peer */
         cm_log_error("%s", ipc_error(ch));
         exit_code = g_sig->stop ? 128 + (int)g_sig->stop : SCM_EXIT_PEER;
         goto cleanup;

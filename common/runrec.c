@@ -2,9 +2,10 @@
 #include "runrec.h"
 
 #include <errno.h>
-#include <math.h>
 #include <stdio.h>
 #include <string.h>
+
+#include "json.h"
 
 static int slot(cm_run_record *r, const char *key)
 {
@@ -35,21 +36,6 @@ void cm_runrec_text(cm_run_record *r, const char *key, const char *text)
     }
 }
 
-static void json_text(FILE *f, const char *t)
-{
-    fputc('"', f);
-    for (; *t; t++) {
-        unsigned char c = (unsigned char)*t;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
-        else
-            fputc(c, f);
-    }
-    fputc('"', f);
-}
-
 int cm_runrec_write(const cm_run_record *r, const char *path, cm_error *err)
 {
     char tmp[1200];
@@ -60,17 +46,12 @@ int cm_runrec_write(const cm_run_record *r, const char *path, cm_error *err)
     fputc('{', f);
     for (int i = 0; i < r->n; i++) {
         fprintf(f, "%s\n  ", i ? "," : "");
-        json_text(f, r->item[i].key);
+        cm_json_string(f, r->item[i].key);
         fputs(": ", f);
-        const double v = r->item[i].num;
         if (r->item[i].is_text)
-            json_text(f, r->item[i].text);
-        else if (!isfinite(v))
-            fputs("null", f); /* JSON has no infinity nor NaN */
-        else if (v == floor(v) && fabs(v) < 1e15)
-            fprintf(f, "%.0f", v);
+            cm_json_string(f, r->item[i].text);
         else
-            fprintf(f, "%.17g", v);
+            cm_json_number(f, r->item[i].num);
     }
     fputs("\n}\n", f);
     const int bad = ferror(f) != 0;

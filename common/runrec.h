@@ -20,7 +20,7 @@ typedef struct cm_run_record {
     struct {
         char key[40];
         int is_text;
-        double num;      /* written with 17 digits; integers as integers */
+        double num;      /* written with 17 digits (cm_json_number) */
         char text[1100]; /* a message (cm_error's) or a name */
     } item[CM_RUNREC_MAX_ITEMS];
 } cm_run_record;

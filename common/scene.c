@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "json.h"
+
 /* The --set overrides of this process (cm_scene_add_override). */
 static const char *g_overrides[CM_SCENE_MAX_OVERRIDES];
 static int g_n_overrides;
@@ -543,21 +545,6 @@ int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err)
     return CM_OK;
 }
 
-static void json_string(FILE *f, const char *t)
-{
-    fputc('"', f);
-    for (; t && *t; t++) {
-        unsigned char c = (unsigned char)*t;
-        if (c == '"' || c == '\\')
-            fprintf(f, "\\%c", c);
-        else if (c < 0x20)
-            fprintf(f, "\\u%04x", c);
-        else
-            fputc(c, f);
-    }
-    fputc('"', f);
-}
-
 /* One setting as JSON: groups are objects, arrays and lists are arrays,
  * floats always carry a point or an exponent (so that a reader keeps 1.0 a
  * float) and 17 digits (they read back bit for bit). */
@@ -574,7 +561,7 @@ static void json_setting(FILE *f, const config_setting_t *v, int depth)
             fputs(i ? ", " : "", f);
             if (group) {
                 fprintf(f, "\n%*s", 2 * (depth + 1), "");
-                json_string(f, config_setting_name(e));
+                cm_json_string(f, config_setting_name(e));
                 fputs(": ", f);
             }
             json_setting(f, e, depth + 1);
@@ -605,7 +592,7 @@ static void json_setting(FILE *f, const config_setting_t *v, int depth)
         fputs(config_setting_get_bool(v) ? "true" : "false", f);
         break;
     case CONFIG_TYPE_STRING:
-        json_string(f, config_setting_get_string(v));
+        cm_json_string(f, config_setting_get_string(v));
         break;
     default:
         fputs("null", f);

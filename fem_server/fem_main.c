@@ -220,15 +220,17 @@ static int run(const options *o)
     if ((rc = fem_solve_static(model, &err)))
         goto fail;
     fem_stability stab;
-    fem_get_stability(model, &stab);
+    const int have_stab = fem_get_stability(model, &stab) == CM_OK; /* none for a rigid tire (zeros) */
     cm_log_info("tire: %d nodes, %d tetrahedra; static solve done in %.2f s; FEM step limit %.3g s "
                 "(estimate h/c %.3g s)",
                 n_mesh_nodes, n_tets, cm_now() - t0, stab.dt_limit, stab.dt_estimate);
     cm_runrec_num(&rec, "nodes", n_mesh_nodes);
     cm_runrec_num(&rec, "tets", n_tets);
     cm_runrec_num(&rec, "dt", cfg.dt);
-    cm_runrec_num(&rec, "dt_limit", stab.dt_limit);
-    cm_runrec_num(&rec, "dt_estimate", stab.dt_estimate);
+    if (have_stab) {
+        cm_runrec_num(&rec, "dt_limit", stab.dt_limit);
+        cm_runrec_num(&rec, "dt_estimate", stab.dt_estimate);
+    }
 
     double mesh_mass, mesh_inertia;
     fem_mass_properties(model, &mesh_mass, &mesh_inertia);

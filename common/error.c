@@ -42,6 +42,8 @@ const char *cm_error_name(int code)
     case CM_ERR_NOMEM: return "out of memory";
     case CM_ERR_NUMERIC: return "numerical error";
     case CM_ERR_STATE: return "invalid state";
+    case CM_ERR_PEER: return "peer failed";
+    case CM_WARN_STALE: return "stale cached file (warning)";
     default: return "unknown error";
     }
 }

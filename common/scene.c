@@ -8,6 +8,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "json.h"
+
 /* The --set overrides of this process (cm_scene_add_override). */
 static const char *g_overrides[CM_SCENE_MAX_OVERRIDES];
 static int g_n_overrides;
@@ -543,12 +545,75 @@ int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err)
     return CM_OK;
 }
 
-int cm_scene_print_config(const char *path, FILE *f, cm_error *err)
+/* One setting as JSON: groups are objects, arrays and lists are arrays,
+ * floats always carry a point or an exponent (so that a reader keeps 1.0 a
+ * float) and 17 digits (they read back bit for bit). */
+static void json_setting(FILE *f, const config_setting_t *v, int depth)
+{
+    switch (config_setting_type(v)) {
+    case CONFIG_TYPE_GROUP:
+    case CONFIG_TYPE_ARRAY:
+    case CONFIG_TYPE_LIST: {
+        const int group = config_setting_type(v) == CONFIG_TYPE_GROUP, n = config_setting_length(v);
+        fputc(group ? '{' : '[', f);
+        for (int i = 0; i < n; i++) {
+            const config_setting_t *e = config_setting_get_elem(v, (unsigned)i);
+            fputs(i ? ", " : "", f);
+            if (group) {
+                fprintf(f, "\n%*s", 2 * (depth + 1), "");
+                cm_json_string(f, config_setting_name(e));
+                fputs(": ", f);
+            }
+            json_setting(f, e, depth + 1);
+        }
+        if (group && n > 0)
+            fprintf(f, "\n%*s", 2 * depth, "");
+        fputc(group ? '}' : ']', f);
+        break;
+    }
+    case CONFIG_TYPE_INT:
+    case CONFIG_TYPE_INT64:
+        fprintf(f, "%lld", config_setting_get_int64(v));
+        break;
+    case CONFIG_TYPE_FLOAT: {
+        char num[40];
+        const double x = config_setting_get_float(v);
+        if (!isfinite(x)) { /* JSON has no infinity nor NaN */
+            fputs("null", f);
+            break;
+        }
+        snprintf(num, sizeof num, "%.17g", x);
+        fputs(num, f);
+        if (!strpbrk(num, ".eE"))
+            fputs(".0", f);
+        break;
+    }
+    case CONFIG_TYPE_BOOL:
+        fputs(config_setting_get_bool(v) ? "true" : "false", f);
+        break;
+    case CONFIG_TYPE_STRING:
+        cm_json_string(f, config_setting_get_string(v));
+        break;
+    default:
+        fputs("null", f);
+    }
+}
+
+int cm_scene_write_json(const cm_scene *s, FILE *f, cm_error *err)
+{
+    json_setting(f, config_root_setting(&s->cfg), 0);
+    fputc('\n', f);
+    if (fflush(f) != 0 || ferror(f))
+        return cm_fail(err, CM_ERR_IO, "%s: writing the resolved scene failed", s->path);
+    return CM_OK;
+}
+
+int cm_scene_print_config(const char *path, int json, FILE *f, cm_error *err)
 {
     cm_scene *s = NULL;
     int rc = cm_scene_open(path, &s, err);
     if (rc == CM_OK)
-        rc = cm_scene_write(s, f, err);
+        rc = json ? cm_scene_write_json(s, f, err) : cm_scene_write(s, f, err);
     cm_scene_close(&s);
     return rc;
 }

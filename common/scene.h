@@ -74,9 +74,14 @@ int cm_scene_check_unknown(cm_scene *s, const char *const *sections, cm_error *e
  * in libconfig syntax: what `--print-config` prints, so that scripts read a
  * resolved scene instead of parsing libconfig and --set themselves. */
 int cm_scene_write(const cm_scene *s, FILE *f, cm_error *err);
-/* --print-config of both servers: opens the scene file (with the registered
- * overrides), writes it to f and closes it. */
-int cm_scene_print_config(const char *path, FILE *f, cm_error *err);
+/* The same as JSON: groups are objects, arrays and lists are arrays, floats
+ * always with a point or an exponent (1.0 stays a float) to 17 digits. What
+ * scripts read (bench/post/runio.py), so that none parses libconfig. */
+int cm_scene_write_json(const cm_scene *s, FILE *f, cm_error *err);
+/* --print-config (json = 0) and --print-config=json (json = 1) of both
+ * servers: opens the scene file (with the registered overrides), writes it to
+ * f and closes it. */
+int cm_scene_print_config(const char *path, int json, FILE *f, cm_error *err);
 
 /* Overrides: "key.path=value", as given by `--set` on the command line, put
  * into the parsed tree before any getter reads it, so the strict readers see

@@ -571,7 +571,7 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
         return cm_fail(err, CM_ERR_IO, "%s: cannot open as HDF5", path);
     if (h5_read_attr_string(f, "params", have, sizeof have) || strcmp(have, want) != 0) {
         H5Fclose(f);
-        return cm_fail(err, CM_ERR_STATE, "holds a bed of other parameters"); /* the caller regenerates it */
+        return cm_fail(err, CM_WARN_STALE, "holds a bed of other parameters"); /* the caller regenerates it */
     }
     /* The code that settled it: a bed this build would not produce is not served. */
     uint64_t fp = 0;
@@ -584,7 +584,7 @@ int dem_bed_load(dem_world *w, const dem_bed_params *p, const char *path, cm_err
     snprintf(fp_want, sizeof fp_want, "%016llx", (unsigned long long)fp);
     if (h5_read_attr_string(f, "code_fingerprint", fp_have, sizeof fp_have) || strcmp(fp_have, fp_want) != 0) {
         H5Fclose(f);
-        return cm_fail(err, CM_ERR_STATE,
+        return cm_fail(err, CM_WARN_STALE,
                        "was settled by other code (settling-code fingerprint %s, this build's %s: the contact laws, "
                        "integration, compiler or CPU-dependent libm results differ)",
                        fp_have[0] ? fp_have : "none", fp_want);
@@ -670,7 +670,7 @@ int dem_bed_build(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, vo
             cm_log_info("bed loaded from %s (%d grains)", p->file, w->g.n);
             return CM_OK;
         }
-        if (rc != CM_ERR_STATE) {
+        if (rc != CM_WARN_STALE) { /* an error, not a stale file (a warning, > 0) */
             if (err)
                 *err = why;
             return rc;

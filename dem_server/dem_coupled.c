@@ -173,8 +173,8 @@ int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *e
     ad.stop_flag = def->stop_flag;
     char ipc_err[512];
     cm_log_info("attaching to %s (dt %.3g s, exchange every %d steps)", def->shm, def->dt, def->exchange_every);
-    if (ipc_attach(def->shm, &ad, ch, ipc_err, sizeof ipc_err))
-        return cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_err);
+    if (ipc_attach(def->shm, &ad, ch, ipc_err, sizeof ipc_err)) /* ipc's code, mapped: the message names the peer */
+        return cm_fail(err, CM_ERR_PEER, "%s", ipc_err);
     return CM_OK;
 }
 
@@ -182,7 +182,8 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
                     cm_error *err)
 {
     coupled c = {.w = w, .ch = ch};
-    int rc = CM_OK;
+    int rc = CM_OK;     /* common/error.h codes */
+    int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, mapped to CM_ERR_PEER at the end */
 
     c.nn = ipc_surface_node_count(c.ch);
     uint32_t nt = ipc_surface_tri_count(c.ch);
@@ -243,7 +244,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if ((rc = stage_surface(&c, def, finish, &acc, err)))
             goto done;
         lap(&t_lap, &prof.surface);
-        if ((rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
+        if ((ipc_rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
             break;
         lap(&t_lap, &prof.send);
         if (!finish && (rc = dem_step_grains(w, err)))
@@ -252,7 +253,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
 
         const ipc_frame_head *in;
         const double *q;
-        if ((rc = ipc_recv(c.ch, &in, &q)))
+        if ((ipc_rc = ipc_recv(c.ch, &in, &q)))
             break;
         lap(&t_lap, &prof.wait);
         uint32_t kind = in->kind, flags = in->flags;
@@ -268,7 +269,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if (kind == IPC_FRAME_FINISH)
             break;
         if (!(kind == IPC_FRAME_DATA)) {
-            rc = cm_fail(err, DEM_COUPLED_PEER, "unexpected frame kind %u from fem_server at exchange %ld", kind, n);
+            rc = cm_fail(err, CM_ERR_PEER, "unexpected frame kind %u from fem_server at exchange %ld", kind, n);
             goto done;
         }
         if ((rc = dem_surface_update(w, c.x, c.v, err)))
@@ -304,9 +305,9 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     }
     if (def->profile)
         *def->profile = prof;
-    if (rc) {
-        /* The exchange failed: the message names the peer and the step. */
-        rc = cm_fail(err, DEM_COUPLED_PEER, "%s", ipc_error(c.ch));
+    if (ipc_rc) {
+        /* The exchange failed: ipc's message names the peer and the step. */
+        rc = cm_fail(err, CM_ERR_PEER, "%s", ipc_error(c.ch));
         goto done;
     }
     ipc_stats st = ipc_get_stats(c.ch);
@@ -315,7 +316,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
                 n, time, st.wait_recv_s + st.wait_send_s, cm_now() - t_start, c.w_dem);
     cm_log_info("final state: dem_world_hash %016llx", (unsigned long long)dem_world_hash(w));
 done:
-    if (rc && c.ch && rc != DEM_COUPLED_PEER)
+    if (rc && c.ch && rc != CM_ERR_PEER)
         ipc_fail(c.ch, "dem_server: %s", err->msg);
     ipc_close(&c.ch, rc ? IPC_ERR_PEER_FAILED : IPC_OK);
     coupled_free(&c);

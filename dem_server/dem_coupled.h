@@ -9,9 +9,6 @@
 #include "dem_window.h"
 #include "ipc.h"
 
-/* Status returned when the exchange or the peer failed (exit code 3). */
-#define DEM_COUPLED_PEER (-100)
-
 /* Where the coupled loop's wall time went, per stage of an exchange
  * (dem_coupled.c), summed over the run. */
 typedef struct dem_coupled_profile {
@@ -72,7 +69,9 @@ typedef struct dem_coupled_hooks {
  * peer that never came: from the handshake on it waits on our heartbeat. */
 int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *err);
 /* Runs until def->end_time or until fem_server asks to stop, then closes ch
- * (the world holds its grains by then). */
+ * (the world holds its grains by then). Both return common/error.h codes:
+ * CM_ERR_PEER when the exchange failed (ipc's code mapped, the message naming
+ * the peer: exit code 3), another error of the DEM's own (the peer is told). */
 int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
                     cm_error *err);
 

@@ -16,7 +16,6 @@
  *                radius = r; material = "soil"; }, ... );           m
  * The time step is coupling.dt (dem.dt, if given, must agree with it). */
 #include <errno.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -31,23 +30,14 @@
 #include "h5io.h"
 #include "log.h"
 #include "runcfg.h"
+#include "runrec.h"
+#include "signals.h"
 #include "scene.h"
 #include "timer.h"
 
-/* SIGINT/SIGTERM: while the coupled loop can checkpoint (g_graceful), the
- * run asks fem_server for a checkpoint of the next exchange and ends cleanly
- * (g_interrupt); before that, or if that has not ended the run within 10 s,
- * everything stops at once (g_stop: every wait returns). */
-static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
-static void on_signal(int sig)
-{
-    if (!g_interrupt && g_graceful)
-        alarm(10);
-    g_interrupt = sig;
-    if (!g_graceful)
-        g_stop = sig;
-}
-static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
+/* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
+ * or stop at once before the exchange loop or 10 s later). */
+static cm_signal_flags *g_sig;
 
 typedef struct options {
     const char *scene, *shm, *out, *resume;
@@ -117,12 +107,12 @@ static int settle_progress(dem_world *w, void *user)
 {
     (void)user;
     if (dem_world_steps(w) % 10000 != 0)
-        return g_stop != 0;
+        return g_sig->stop != 0;
     dem_stats s;
     dem_world_stats(w, &s);
     cm_log_info("settling: t = %.4f s, KE/grain = %.3g J, contacts %d", s.time,
                 (s.ke_trans + s.ke_rot) / (s.grains ? s.grains : 1), s.contacts_gg + s.contacts_gw);
-    return g_stop != 0;
+    return g_sig->stop != 0;
 }
 
 static int after_exchange(dem_world *w, void *user, long exchange, cm_error *err)
@@ -256,10 +246,14 @@ static int run(const options *o)
     ipc_channel *ch = NULL;
     dem_window *window = NULL;
     output_ctx octx = {0};
+    char dem_path[1100] = ""; /* the checkpoint to resume from: octx.resume_path, for the whole run */
     cm_run_config rcfg;
     dem_config cfg;
     int surface_material = 0, exit_code = 1, rc;
     dem_coupled_profile cprof = {0};
+    cm_run_record rec = {0}; /* dem_run.json: what scripts read of this run (common/runrec.h) */
+    cm_runrec_text(&rec, "program", "dem_server");
+    cm_runrec_text(&rec, "scene", o->scene);
 
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
         (rc = dem_config_read(scene, &cfg, &err)))
@@ -290,16 +284,16 @@ static int run(const options *o)
                            .surface_material = surface_material,
                            .max_overlap = rcfg.max_overlap,
                            .max_surface_overlap = rcfg.max_surface_overlap,
-                           .stop_flag = &g_stop,
+                           .stop_flag = &g_sig->stop,
                            .profile = &cprof};
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */
     if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
-        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
-            cm_log_info("stopped by signal %d while waiting for fem_server", (int)g_stop);
+        if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for fem_server", (int)g_sig->stop);
         else
             cm_log_error("%s", err.msg);
-        exit_code = g_stop ? 128 + (int)g_stop : 3;
+        exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
         goto cleanup;
     }
 
@@ -310,7 +304,6 @@ static int run(const options *o)
     octx.scene_hash = cm_scene_overrides_hash(octx.scene_hash);
     if (o->resume) {
         char fem_path[1100];
-        static char dem_path[1100];
         if ((rc = cm_ckpt_choose(o->resume, &octx.resume_exchange, dem_path, fem_path, sizeof dem_path, &err)))
             goto fail;
         octx.resume_path = dem_path;
@@ -360,11 +353,18 @@ static int run(const options *o)
     dem_time_limits(w, &t_rayleigh, &t_hertz);
     cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s)", dem_grain_count(w),
                 rcfg.dt, t_rayleigh, t_hertz);
+    cm_runrec_num(&rec, "grains", dem_grain_count(w));
+    cm_runrec_num(&rec, "dt", rcfg.dt);
+    cm_runrec_num(&rec, "exchange_every", rcfg.exchange_every);
+    cm_runrec_num(&rec, "t_rayleigh", t_rayleigh);
+    cm_runrec_num(&rec, "t_hertz", t_hertz);
+    cm_runrec_num(&rec, "dt_safety_rayleigh", cfg.world.dt_safety_rayleigh);
+    cm_runrec_num(&rec, "dt_safety_hertz", cfg.world.dt_safety_hertz);
 
     if (o->standalone) {
         long steps = (long)(rcfg.end_time / rcfg.dt + 0.5);
         double last = cm_now();
-        for (long k = 0; k < steps && !g_stop; k++) {
+        for (long k = 0; k < steps && !g_sig->stop; k++) {
             if ((rc = dem_step(w, &err)) || (rc = write_outputs(w, &octx, &err)))
                 goto fail;
             if (rcfg.progress_every > 0 && cm_now() - last > rcfg.progress_every) {
@@ -372,32 +372,30 @@ static int run(const options *o)
                 cm_log_info("t = %.4f s (%ld of %ld steps)", (k + 1) * rcfg.dt, k + 1, steps);
             }
         }
-        exit_code = g_stop ? 128 + (int)g_stop : 0;
+        exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 0;
     } else {
         def.bed_height = bed_height;
         def.bed_top = bed_top;
         def.window = window;
         def.window_def = cfg.window;
         octx.window = window;
-        def.interrupt = &g_interrupt;
+        def.interrupt = &g_sig->interrupt;
         dem_coupled_hooks hooks = {.after_exchange = after_exchange,
                                    .checkpoint = octx.dir ? write_checkpoint : NULL,
                                    .restore = o->resume ? restore_checkpoint : NULL,
                                    .user = &octx};
-        g_graceful = octx.dir != NULL; /* from here a signal asks for a checkpoint */
-        if (g_interrupt && g_graceful) /* one that came during the set-up */
-            alarm(10);
+        cm_signals_graceful(octx.dir != NULL); /* from here a signal asks for a checkpoint */
         rc = dem_run_coupled(w, ch, &def, &hooks, &err);
-        g_graceful = 0;
+        cm_signals_graceful(0);
         ch = NULL; /* closed by the run */
-        if (rc == DEM_COUPLED_PEER) {
+        if (rc == CM_ERR_PEER) {
             cm_log_error("%s", err.msg);
-            exit_code = g_stop ? 128 + (int)g_stop : 3;
+            exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
             goto cleanup;
         }
         if (rc)
             goto fail;
-        exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+        exit_code = g_sig->interrupt ? 128 + (int)g_sig->interrupt : 0;
         if (window) {
             const dem_window_state *ws = dem_window_get_state(window);
             cm_log_info("window: %d removals (%ld grains), %d stretches appended (%ld grains), lowest seam solid "
@@ -419,6 +417,17 @@ fail:
     exit_code = 1;
 cleanup:
     ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
+    if (o->out) {
+        char path[1100];
+        snprintf(path, sizeof path, "%s/dem_run.json", o->out);
+        cm_runrec_num(&rec, "exchanges", (double)cprof.exchanges);
+        cm_runrec_num(&rec, "exit_code", exit_code);
+        cm_runrec_num(&rec, "signal", g_sig->stop ? g_sig->stop : g_sig->interrupt);
+        cm_runrec_text(&rec, "error", exit_code != 0 ? err.msg : "");
+        cm_error rerr = {0};
+        if (cm_runrec_write(&rec, path, &rerr))
+            cm_log_warn("%s", rerr.msg);
+    }
     dem_output_close(&octx.out);
     dem_window_free(&window);
     dem_world_destroy(&w);
@@ -429,7 +438,7 @@ cleanup:
 static int usage(void)
 {
     fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
-                    "                  [--resume DIR] [--set KEY=VALUE]... [--print-config]\n"
+                    "                  [--resume DIR] [--set KEY=VALUE]... [--print-config[=json]]\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");
     return 2;
@@ -455,6 +464,8 @@ int main(int argc, char **argv)
             o.standalone = 1;
         else if (strcmp(a, "--print-config") == 0)
             print_config = 1;
+        else if (strcmp(a, "--print-config=json") == 0)
+            print_config = 2;
         else if (strcmp(a, "--set") == 0 && v) {
             cm_error err = {0};
             if (cm_scene_add_override(v, &err)) {
@@ -467,7 +478,7 @@ int main(int argc, char **argv)
     }
     if (o.scene && print_config) { /* the resolved scene (file + --set), common/scene.h */
         cm_error err = {0};
-        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+        if (cm_scene_print_config(o.scene, print_config == 2, stdout, &err) == CM_OK)
             return 0;
         fprintf(stderr, "dem_server: %s\n", err.msg);
         return 1;
@@ -476,13 +487,7 @@ int main(int argc, char **argv)
         return usage();
     cm_log_set_tag("dem");
     cm_h5_library_init();
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
+    g_sig = cm_signals_install();
     if (o.out && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

@@ -13,7 +13,13 @@
  * libccd's tolerances are absolute: every query runs in coordinates centred
  * on the first body and divided by the larger bounding radius of the pair, so
  * mpr_tolerance is relative to the grain size. CCD_INIT leaves max_iterations
- * unlimited; we set it. */
+ * unlimited; we set it.
+ *
+ * The code, by job: dem_shape.c (shapes: hulls, mass properties, random
+ * polyhedra), dem_shape_algebra.c (3x3 algebra), dem_shape_rotation.c (free
+ * rotation), dem_shape_ccd.c (posed bodies, libccd), dem_shape_contact.c
+ * (contacts of shaped grains); dem_poly_contact.c (polyhedron pairs by
+ * overlap volume). */
 #ifndef DEM_SHAPE_H
 #define DEM_SHAPE_H
 

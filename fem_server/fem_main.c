@@ -2,7 +2,7 @@
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
- *   fem_server --scene FILE --print-config           the resolved scene (file + --set), then exit
+ *   fem_server --scene FILE --print-config[=json]    the resolved scene (file + --set), then exit
  *   fem_server --scene FILE --fem-only [--out DIR]   the tire model alone (fem.supports, fem.loads)
  *   --resume DIR: continue the run of DIR from its last checkpoint
  *
@@ -21,7 +21,6 @@
  * interrupted (SIGINT/SIGTERM; the run then ends cleanly). */
 #include <errno.h>
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -37,22 +36,14 @@
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
+#include "runrec.h"
+#include "signals.h"
 #include "fem_summary.h" /* [traction] */
 #include "timer.h"
 
-/* SIGINT/SIGTERM: during the exchange loop (g_graceful) the next exchange
- * is checkpointed and the run ends cleanly (g_interrupt); before that, or if
- * that has not ended the run within 10 s, everything stops at once (g_stop). */
-static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
-static void on_signal(int sig)
-{
-    if (!g_interrupt && g_graceful)
-        alarm(10);
-    g_interrupt = sig;
-    if (!g_graceful)
-        g_stop = sig;
-}
-static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
+/* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
+ * or stop at once before the exchange loop or 10 s later). */
+static cm_signal_flags *g_sig;
 
 typedef struct options {
     const char *scene, *shm, *out, *export_mesh, *resume;
@@ -178,6 +169,10 @@ static int run(const options *o)
     cm_h5 *h5 = NULL;
     fem_coupled c = {0};
     int exit_code = 1, rc, clean_stop = 0;
+    const char *peer_msg = NULL; /* what stopped the run when the link to the peer did */
+    cm_run_record rec = {0};     /* fem_run.json: what scripts read of this run (common/runrec.h) */
+    cm_runrec_text(&rec, "program", "fem_server");
+    cm_runrec_text(&rec, "scene", o->scene);
 
     cm_run_config rc_cfg;
     drive_def drive = drive_def_default();
@@ -225,10 +220,17 @@ static int run(const options *o)
     if ((rc = fem_solve_static(model, &err)))
         goto fail;
     fem_stability stab;
-    fem_get_stability(model, &stab);
+    const int have_stab = fem_get_stability(model, &stab) == CM_OK; /* none for a rigid tire (zeros) */
     cm_log_info("tire: %d nodes, %d tetrahedra; static solve done in %.2f s; FEM step limit %.3g s "
                 "(estimate h/c %.3g s)",
                 n_mesh_nodes, n_tets, cm_now() - t0, stab.dt_limit, stab.dt_estimate);
+    cm_runrec_num(&rec, "nodes", n_mesh_nodes);
+    cm_runrec_num(&rec, "tets", n_tets);
+    cm_runrec_num(&rec, "dt", cfg.dt);
+    if (have_stab) {
+        cm_runrec_num(&rec, "dt_limit", stab.dt_limit);
+        cm_runrec_num(&rec, "dt_estimate", stab.dt_estimate);
+    }
 
     double mesh_mass, mesh_inertia;
     fem_mass_properties(model, &mesh_mass, &mesh_inertia);
@@ -256,7 +258,7 @@ static int run(const options *o)
     c.scene_hash = scene_hash;
     c.interval = cm_run_exchange_dt(&rc_cfg);
     c.hooks = (fem_exchange_hooks){.after_advance = after_advance, .user = NULL};
-    c.interrupt = &g_interrupt;
+    c.interrupt = &g_sig->interrupt;
     fem_energy en0;
     fem_get_energy(model, &en0);
     c.elastic0 = en0.elastic; /* the inflated tire before any grain touches it */
@@ -273,10 +275,11 @@ static int run(const options *o)
     def.exchange_dt = c.interval;
     def.stall_timeout = rc_cfg.stall_timeout;
     def.connect_timeout = rc_cfg.connect_timeout;
-    def.stop_flag = &g_stop;
+    def.stop_flag = &g_sig->stop;
     char ipc_err[512];
-    if ((rc = ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err))) {
+    if (ipc_create(o->shm, &def, &ch, ipc_err, sizeof ipc_err)) { /* ipc.h codes: not mixed into rc */
         cm_log_error("%s", ipc_err);
+        peer_msg = ipc_err;
         exit_code = 3;
         goto cleanup;
     }
@@ -291,11 +294,11 @@ static int run(const options *o)
     fem_interface_masses(model, ipc_surface_masses(ch));
     memcpy(c.x_prev, ipc_surface_nodes(ch), 3 * (size_t)c.nn * sizeof(double));
     cm_log_info("interface: %u nodes, %u triangles; waiting for dem_server on %s", c.nn, nt, o->shm);
-    if ((rc = ipc_accept(ch))) {
-        if (g_stop) /* stopped by the launcher because the other side failed: that side says why */
-            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_stop);
+    if (ipc_accept(ch)) {
+        if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
+            cm_log_info("stopped by signal %d while waiting for dem_server", (int)g_sig->stop);
         else
-            cm_log_error("%s", ipc_error(ch));
+            cm_log_error("%s", peer_msg = ipc_error(ch));
         exit_code = 3;
         goto cleanup;
     }
@@ -344,23 +347,21 @@ static int run(const options *o)
      * finishes the run (fem_exchange.c has the stages). */
     c.last_progress = c.loop_t0 = cm_now();
     c.n_first = c.n;
-    g_graceful = 1; /* from here a signal asks for a checkpoint */
-    if (g_interrupt)
-        alarm(10);
+    cm_signals_graceful(1); /* from here a signal asks for a checkpoint */
     fem_exchange_status st;
     while ((st = fem_exchange(&c, &err)) == FEM_EXCHANGE_NEXT)
         ;
-    g_graceful = 0;
+    cm_signals_graceful(0);
     if (st == FEM_EXCHANGE_FAILED)
         goto fail;
     if (st == FEM_EXCHANGE_LINK_LOST) {
-        cm_log_error("%s", ipc_error(ch));
-        exit_code = g_stop ? 128 + (int)g_stop : 3;
+        cm_log_error("%s", peer_msg = ipc_error(ch));
+        exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
         goto cleanup;
     }
     if ((rc = finish_run(o, &c, h5, cfg.mesh == FEM_MESH_TIRE ? 2.0 * M_PI / cfg.tire.lugs : 0.0, &err)))
         goto fail;
-    exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+    exit_code = g_sig->interrupt ? 128 + (int)g_sig->interrupt : 0;
     clean_stop = 1;
     goto cleanup;
 
@@ -372,6 +373,17 @@ fail:
 cleanup:
     if (h5 && cm_h5_close(&h5, &err))
         cm_log_error("%s", err.msg);
+    if (!o->export_mesh) {
+        char rec_path[1100];
+        snprintf(rec_path, sizeof rec_path, "%s/fem_run.json", o->out);
+        cm_runrec_num(&rec, "exchanges", (double)c.n);
+        cm_runrec_num(&rec, "exit_code", exit_code);
+        cm_runrec_num(&rec, "signal", g_sig->stop ? g_sig->stop : g_sig->interrupt);
+        cm_runrec_text(&rec, "error", exit_code == 0 ? "" : peer_msg ? peer_msg : err.msg);
+        cm_error rerr = {0};
+        if (cm_runrec_write(&rec, rec_path, &rerr))
+            cm_log_warn("%s", rerr.msg);
+    }
     /* interrupted but finished cleanly (checkpoint written, finish answered): not a failure for the peer */
     ipc_close(&ch, exit_code == 0 || clean_stop ? IPC_OK : IPC_ERR_PEER_FAILED);
     fem_destroy(&model);
@@ -385,14 +397,15 @@ static int usage(void)
 {
     fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
-                    "       fem_server --scene FILE [--set KEY=VALUE]... --print-config\n"
+                    "       fem_server --scene FILE [--set KEY=VALUE]... --print-config[=json]\n"
                     "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"
                     "  The tire side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --export-mesh writes the scene's mesh (e.g. the built-in tire) as Gmsh .msh v4.1\n"
                     "  with the physical groups rim, cavity and contact, and exits.\n"
                     "  --set overrides a scene setting, e.g. --set fem.mesh.resolution=0.5 (repeatable).\n"
                     "  --print-config prints the scene as resolved (the file with every --set applied) in\n"
-                    "  libconfig syntax on stdout and exits: scripts read settings from it.\n"
+                    "  libconfig syntax on stdout and exits; --print-config=json prints it as JSON, which\n"
+                    "  scripts read (bench/post/runio.py) instead of parsing libconfig.\n"
                     "  --fem-only runs the tire model alone, no DEM peer: the static solve under\n"
                     "  fem.supports and fem.loads, or with fem.analysis = \"dynamic\" the response\n"
                     "  from rest to run.end_time; results in DIR/fem.h5 and DIR/fem_series.csv.\n");
@@ -414,6 +427,8 @@ int main(int argc, char **argv)
             o.resume = o.out = argv[++i];
         else if (strcmp(argv[i], "--print-config") == 0)
             o.print_config = 1;
+        else if (strcmp(argv[i], "--print-config=json") == 0)
+            o.print_config = 2;
         else if (strcmp(argv[i], "--fem-only") == 0)
             o.fem_only = 1;
         else if (strcmp(argv[i], "--export-mesh") == 0 && i + 1 < argc)
@@ -431,20 +446,14 @@ int main(int argc, char **argv)
         return usage();
     if (o.print_config) { /* the scene as resolved: file + --set, libconfig syntax */
         cm_error err = {0};
-        if (cm_scene_print_config(o.scene, stdout, &err) == CM_OK)
+        if (cm_scene_print_config(o.scene, o.print_config == 2, stdout, &err) == CM_OK)
             return 0;
         fprintf(stderr, "fem_server: %s\n", err.msg);
         return 1;
     }
     cm_log_set_tag("fem");
     cm_h5_library_init();
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
+    g_sig = cm_signals_install();
     if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "drive.h"
+#include "json.h"
 #include "log.h"
 #include "steady.h"
 
@@ -66,29 +67,6 @@ static int read_series(const char *path, double **col, size_t *n, cm_error *err)
         H5Dclose(ds);
     H5Fclose(f);
     return rc;
-}
-
-static void json_str(FILE *f, const char *s)
-{
-    fputc('"', f);
-    for (; s && *s; s++) {
-        if (*s == '"' || *s == '\\')
-            fprintf(f, "\\%c", *s);
-        else if ((unsigned char)*s < 0x20)
-            fprintf(f, "\\u%04x", (unsigned char)*s);
-        else
-            fputc(*s, f);
-    }
-    fputc('"', f);
-}
-
-/* %.17g, or null for a value JSON cannot hold */
-static void json_num(FILE *f, double v)
-{
-    if (isfinite(v))
-        fprintf(f, "%.17g", v);
-    else
-        fputs("null", f);
 }
 
 static int attr_double(hid_t obj, const char *name, double v)
@@ -356,37 +334,37 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
     if (!f)
         return cm_fail(err, CM_ERR_IO, "%s: cannot create", tmp);
     fputs("{\n  \"format\": \"demfem-summary-1\",\n  \"scene\": ", f);
-    json_str(f, d->scene);
+    cm_json_string(f, d->scene);
     fprintf(f, ",\n  \"control\": \"%s\",\n  \"motion\": \"%s\",\n  \"target_load\": ", k_control[d->control],
             d->motion >= 0 && d->motion <= 2 ? k_motion[d->motion] : "?");
-    json_num(f, d->target_load);
+    cm_json_number(f, d->target_load);
     fputs(",\n  \"radius\": ", f);
-    json_num(f, d->radius);
+    cm_json_number(f, d->radius);
     fprintf(f, ",\n  \"fem_state_hash\": \"%016llx\",\n  \"travelled\": %s,\n  \"steady\": {\"start_time\": ",
             (unsigned long long)d->fem_state_hash, r->travelled ? "true" : "false");
-    json_num(f, r->t_start);
+    cm_json_number(f, r->t_start);
     fputs(", \"end_time\": ", f);
-    json_num(f, r->t_end);
+    cm_json_number(f, r->t_end);
     fputs(", \"travel_m\": ", f);
-    json_num(f, r->travel_m);
+    cm_json_number(f, r->travel_m);
     fprintf(f, ", \"exchanges\": %zu, \"travel_exchanges\": %zu, \"lug_periods\": %.0f, \"lug_period_rad\": ",
             r->end - r->start, r->n_travel, r->lug_periods);
-    json_num(f, d->lug_period);
+    cm_json_number(f, d->lug_period);
     fputs("},\n  \"quantities\": {", f);
     for (int q = 0; r->travelled && q < NQ; q++) {
         const steady_stats *s = &r->q[q];
         fprintf(f, "%s\n    \"%s\": {\"unit\": \"%s\", \"mean\": ", q ? "," : "", k_names[q], k_units[q]);
-        json_num(f, s->mean);
+        cm_json_number(f, s->mean);
         fputs(", \"half_width\": ", f);
-        json_num(f, s->half_width);
+        cm_json_number(f, s->half_width);
         fputs(", \"sd\": ", f);
-        json_num(f, s->sd);
+        cm_json_number(f, s->sd);
         fputs(", \"min\": ", f);
-        json_num(f, s->min);
+        cm_json_number(f, s->min);
         fputs(", \"max\": ", f);
-        json_num(f, s->max);
+        cm_json_number(f, s->max);
         fputs(", \"tau_s\": ", f);
-        json_num(f, s->tau * d->interval);
+        cm_json_number(f, s->tau * d->interval);
         fprintf(f, ", \"samples\": %zu, \"batches\": %d, \"short_series\": %s}", s->count, s->batches,
                 s->short_series ? "true" : "false");
     }
@@ -398,7 +376,7 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         for (int k = 0; k < 6; k++) {
             if (k)
                 fputs(", ", f);
-            json_num(f, r->profile[b][k]);
+            cm_json_number(f, r->profile[b][k]);
         }
         fputc(']', f);
     }
@@ -411,13 +389,13 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         for (int k = 0; k < 11; k++) {
             if (k)
                 fputs(", ", f);
-            json_num(f, r->conv[c][k]);
+            cm_json_number(f, r->conv[c][k]);
         }
         fputc(']', f);
     }
     fputs("]},\n  \"warnings\": [", f);
     if (r->warning[0])
-        json_str(f, r->warning);
+        cm_json_string(f, r->warning);
     fputs("]\n}\n", f);
     int bad = ferror(f);
     if (fclose(f) != 0 || bad || rename(tmp, path) != 0) {

@@ -16,7 +16,6 @@
  *                   deepest sinkage (the rut) */
 #include <errno.h>
 #include <math.h>
-#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -28,24 +27,15 @@
 #include "ipc.h"
 #include "log.h"
 #include "runcfg.h"
+#include "signals.h"
 #include "scene.h"
 #include "scm.h"
 #include "scm_config.h"
 #include "timer.h"
 
-/* SIGINT/SIGTERM: the next frame asks fem_server to checkpoint and stop
- * (g_interrupt); if the run has not ended 10 s later every wait gives up
- * (g_stop). */
-static volatile sig_atomic_t g_stop, g_interrupt, g_graceful;
-static void on_signal(int sig)
-{
-    if (!g_interrupt && g_graceful)
-        alarm(10);
-    g_interrupt = sig;
-    if (!g_graceful) /* before the exchange loop: stop at once */
-        g_stop = sig;
-}
-static void on_alarm(int sig) { g_stop = g_interrupt ? g_interrupt : sig; }
+/* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
+ * or stop at once before the exchange loop or 10 s later). */
+static cm_signal_flags *g_sig;
 
 typedef struct options {
     const char *scene, *shm, *out;
@@ -91,6 +81,7 @@ static int run(const options *o)
     cm_run_config rcfg;
     scm_config cfg;
     int rc, exit_code = 1;
+    int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, apart from rc (common/error.h codes) */
 
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rcfg, &err)) ||
         (rc = scm_config_read(scene, &cfg, &err)))
@@ -116,15 +107,15 @@ static int run(const options *o)
     ad.exchange_every = (uint32_t)rcfg.exchange_every;
     ad.stall_timeout = rcfg.stall_timeout;
     ad.connect_timeout = rcfg.connect_timeout;
-    ad.stop_flag = &g_stop;
+    ad.stop_flag = &g_sig->stop;
     char ipc_err[512];
     cm_log_info("attaching to %s (dt %.3g s, exchange every %d steps)", o->shm, rcfg.dt, rcfg.exchange_every);
     if (ipc_attach(o->shm, &ad, &ch, ipc_err, sizeof ipc_err)) {
-        if (g_stop || g_interrupt)
+        if (g_sig->stop || g_sig->interrupt)
             cm_log_info("stopped by a signal while waiting for the FEM side");
         else
             cm_log_error("%s", ipc_err);
-        exit_code = (g_stop || g_interrupt) ? 128 + (int)(g_stop ? g_stop : g_interrupt) : SCM_EXIT_PEER;
+        exit_code = (g_sig->stop || g_sig->interrupt) ? 128 + (int)(g_sig->stop ? g_sig->stop : g_sig->interrupt) : SCM_EXIT_PEER;
         goto cleanup;
     }
     const uint32_t nn = ipc_surface_node_count(ch), nt = ipc_surface_tri_count(ch);
@@ -155,9 +146,7 @@ static int run(const options *o)
     double time = 0, w_dem = 0, t_start = cm_now(), last_progress = t_start, t_exchange = 0, t_output = 0;
     int stop_requested = 0, asked_checkpoint = 0;
     long n = 0;
-    g_graceful = 1;
-    if (g_interrupt) /* one that came during the set-up */
-        alarm(10);
+    cm_signals_graceful(1); /* from here a signal asks for a checkpoint */
     scm_totals tot;
     memset(&tot, 0, sizeof tot);
     for (;; n++) {
@@ -167,7 +156,7 @@ static int run(const options *o)
         double t0 = cm_now();
         ipc_frame_head *out;
         double *p;
-        if ((rc = ipc_send_begin(ch, &out, &p)))
+        if ((ipc_rc = ipc_send_begin(ch, &out, &p)))
             break;
         out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
         out->time = time;
@@ -188,17 +177,17 @@ static int run(const options *o)
             out->info[IPC_INFO_DEM_WORK] = w_dem;
             out->info[IPC_INFO_BED_HEIGHT] = cfg.grid.height;
             out->info[IPC_INFO_BED_TOP] = cfg.grid.height;
-            if (g_interrupt && !asked_checkpoint) {
+            if (g_sig->interrupt && !asked_checkpoint) {
                 out->flags |= IPC_FLAG_CHECKPOINT; /* interrupted: the FEM side checkpoints and stops */
                 asked_checkpoint = 1;
                 cm_log_info("interrupted: asking the FEM side to stop after exchange %ld", n);
             }
         }
-        if ((rc = ipc_send_commit(ch)))
+        if ((ipc_rc = ipc_send_commit(ch)))
             break;
         const ipc_frame_head *in;
         const double *q;
-        if ((rc = ipc_recv(ch, &in, &q)))
+        if ((ipc_rc = ipc_recv(ch, &in, &q)))
             break;
         const uint32_t kind = in->kind, flags = in->flags;
         stop_requested |= (flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
@@ -212,7 +201,7 @@ static int run(const options *o)
         if (kind == IPC_FRAME_FINISH)
             break;
         if (kind != IPC_FRAME_DATA) {
-            rc = cm_fail(&err, CM_ERR_STATE, "unexpected frame kind %u from the FEM side at exchange %ld", kind, n);
+            rc = cm_fail(&err, CM_ERR_PEER, "unexpected frame kind %u from the FEM side at exchange %ld", kind, n);
             goto fail;
         }
         for (size_t k = 0; k < m; k++)
@@ -237,9 +226,9 @@ static int run(const options *o)
                         time, (double)(n + 1) / (now - t_start), tot.contacts, tot.force[2], 1e3 * tot.max_sinkage);
         }
     }
-    if (rc) {
+    if (ipc_rc) { /* ipc's code: its message names the peer */
         cm_log_error("%s", ipc_error(ch));
-        exit_code = g_stop ? 128 + (int)g_stop : SCM_EXIT_PEER;
+        exit_code = g_sig->stop ? 128 + (int)g_sig->stop : SCM_EXIT_PEER;
         goto cleanup;
     }
     {
@@ -260,7 +249,7 @@ static int run(const options *o)
     }
     if (o->out && (rc = write_rut(o->out, t, &cfg.grid, &err)))
         goto fail;
-    exit_code = g_interrupt ? 128 + (int)g_interrupt : 0;
+    exit_code = g_sig->interrupt ? 128 + (int)g_sig->interrupt : 0;
     goto cleanup;
 fail:
     cm_log_error("%s", err.msg);
@@ -313,13 +302,7 @@ int main(int argc, char **argv)
     if (!o.scene || !o.shm)
         return usage();
     cm_log_set_tag("scm");
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal; /* no SA_RESTART: waits wake up and see the flag */
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    sa.sa_handler = on_alarm;
-    sigaction(SIGALRM, &sa, NULL);
+    g_sig = cm_signals_install();
     if (o.out && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;

@@ -88,6 +88,39 @@ int tp_spawn(tp_proc *p, const char *const *argv, const char *log, int flags)
     return rc;
 }
 
+int tp_fork(tp_proc *p, int (*body)(void *arg, int ready_fd), void *arg, int flags)
+{
+    memset(p, 0, sizeof *p);
+    p->pid = -1;
+    p->status = -1;
+    p->ready_fd = -1;
+    p->flags = flags & ~TP_NEW_GROUP;
+    int fds[2] = {-1, -1};
+    if ((flags & TP_READY) && pipe(fds) != 0)
+        return errno;
+    if (fds[0] >= 0)
+        fcntl(fds[0], F_SETFD, FD_CLOEXEC); /* a process spawned later does not hold it */
+    fflush(NULL); /* nothing buffered is written twice */
+    p->t_start = tp_now();
+    pid_t pid = fork();
+    if (pid == 0) {
+        if (fds[0] >= 0)
+            close(fds[0]);
+        _exit(body(arg, fds[1]));
+    }
+    int e = errno;
+    if (fds[1] >= 0)
+        close(fds[1]);
+    if (pid < 0) {
+        if (fds[0] >= 0)
+            close(fds[0]);
+        return e;
+    }
+    p->pid = pid;
+    p->ready_fd = fds[0];
+    return 0;
+}
+
 int tp_wait_ready(tp_proc *p, char mark, double timeout_s)
 {
     if (p->ready_fd < 0)
@@ -137,6 +170,15 @@ int tp_wait(tp_proc *p, double timeout_s)
             return -1;
         tp_nap_ms(2); /* an exited child stays a zombie until reaped: nothing to miss */
     }
+}
+
+int tp_finish(tp_proc *p, double timeout_s)
+{
+    if (tp_wait(p, timeout_s) != 0) {
+        tp_kill(p);
+        return -1;
+    }
+    return p->status;
 }
 
 void tp_kill(tp_proc *p)

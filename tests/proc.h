@@ -1,4 +1,4 @@
-/* Process harness shared by the tests that start real processes (tests/ipc,
+/* Process harness shared by the tests that start real processes (tests/ipc, tests/scm,
  * tests/coupling): spawn with the output in a log file, wait for an exit with
  * a timeout, kill by the pid we started, and a readiness pipe.
  *
@@ -45,6 +45,12 @@ void tp_nap_ms(int ms);
  * errno value. */
 int tp_spawn(tp_proc *p, const char *const *argv, const char *log, int flags);
 
+/* Forks a child that runs body(arg, ready_fd) and exits with its return
+ * value (its output stays this process's). With TP_READY, ready_fd is the
+ * write end of the readiness pipe (for tp_announce), else -1. A child that
+ * uses the ipc library itself, in place of a server. 0 or an errno value. */
+int tp_fork(tp_proc *p, int (*body)(void *arg, int ready_fd), void *arg, int flags);
+
 /* Waits for the byte `mark` on the readiness pipe (bytes before it are
  * skipped). 0 when it came; -1 on timeout or when the child closed the pipe
  * (exited) without sending it. */
@@ -53,6 +59,10 @@ int tp_wait_ready(tp_proc *p, char mark, double timeout_s);
 /* Waits up to timeout_s for the child to exit and reaps it. 0 when it exited
  * (p->status and p->t_exit set), -1 when it is still running. */
 int tp_wait(tp_proc *p, double timeout_s);
+
+/* tp_wait, and when the child is still running after timeout_s, tp_kill:
+ * the exit status as a shell reports it (128 + signal), or -1 on timeout. */
+int tp_finish(tp_proc *p, double timeout_s);
 
 /* SIGKILL (to its group with TP_NEW_GROUP) and reap, if still running;
  * closes the readiness pipe. Safe to call twice. */

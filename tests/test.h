@@ -5,7 +5,12 @@
  * A test program lists its tests in a table and calls test_main():
  *   static const test_case tests[] = {{"hertz_wall", hertz_wall}, ...};
  *   int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }
- * Run one test by naming it: ./test_dem hertz_wall  (ctest does this per case). */
+ * Run one test by naming it: ./test_dem hertz_wall  (ctest does this per case).
+ * The tests[] table is the one list of a program's cases: CMake registers
+ * each entry in ctest (demfem_add_test_table, tests/CMakeLists.txt).
+ * Cases that only measure (they print figures a tolerance was chosen from and
+ * assert nothing) are not tests: they sit in a second table, run only when
+ * named, through test_main_measure(). */
 #ifndef DEMFEM_TEST_H
 #define DEMFEM_TEST_H
 
@@ -60,9 +65,20 @@ typedef struct test_case {
         }                                                                                     \
     } while (0)
 
-static inline int test_main(int argc, char **argv, const test_case *tests, int n)
+static inline int test_main_measure(int argc, char **argv, const test_case *tests, int n,
+                                    const test_case *measurements, int n_measurements)
 {
     int failed = 0, ran = 0;
+    for (int i = 0; i < n_measurements && argc > 1; i++)
+        for (int a = 1; a < argc; a++)
+            if (strcmp(argv[a], measurements[i].name) == 0) {
+                ran++;
+                int rc = measurements[i].fn();
+                printf("%s %s (measurement)\n", rc ? "FAIL" : "done", measurements[i].name);
+                fflush(stdout);
+                failed += rc != 0;
+                break;
+            }
     for (int i = 0; i < n; i++) {
         if (argc > 1) {
             int want = 0;
@@ -82,6 +98,11 @@ static inline int test_main(int argc, char **argv, const test_case *tests, int n
         return 2;
     }
     return failed ? 1 : 0;
+}
+
+static inline int test_main(int argc, char **argv, const test_case *tests, int n)
+{
+    return test_main_measure(argc, argv, tests, n, NULL, 0);
 }
 
 #endif

@@ -149,22 +149,95 @@ def boundary_faces(tets):
     return faces[once], owner[once]
 
 
+def fem_server_path():
+    """fem_server of the build the scripts use: DEMFEM_BUILD_DIR (as ./run
+    sets it), else build/ beside bench/."""
+    build = os.environ.get("DEMFEM_BUILD_DIR") or os.path.join(
+        os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "build")
+    return os.path.join(build, "fem_server", "fem_server")
+
+
+class SceneError(Exception):
+    pass
+
+
+def resolved_scene(scene_path, sets=()):
+    """The scene as the servers resolve it (the file with every KEY=VALUE of
+    sets applied, in order), as nested dicts and lists: fem_server
+    --print-config=json (common/scene.c) prints it, so that no script parses
+    libconfig. Raises SceneError with the server's message."""
+    import json
+    import subprocess
+    cmd = [fem_server_path(), "--scene", scene_path]
+    for kv in sets:
+        cmd += ["--set", kv if isinstance(kv, str) else "%s=%s" % tuple(kv)]
+    cmd.append("--print-config=json")
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as e:
+        raise SceneError("%s: %s (build fem_server first: ./run build)" % (cmd[0], e))
+    if p.returncode != 0:
+        raise SceneError(p.stderr.strip() or "%s exited %d" % (cmd[0], p.returncode))
+    return json.loads(p.stdout)
+
+
+def scene_get(scene, key):
+    """scene["a"]["b"]["c"] for key "a.b.c" (a list index may be a part:
+    "dem.bed.layers.0.count"); KeyError when missing."""
+    v = scene
+    for part in key.split("."):
+        if isinstance(v, list):
+            try:
+                v = v[int(part)]
+            except (ValueError, IndexError):
+                raise KeyError(key)
+        elif isinstance(v, dict) and part in v:
+            v = v[part]
+        else:
+            raise KeyError(key)
+    return v
+
+
+def libconfig_value(v):
+    """A Python value (as resolved_scene gives) as libconfig value text, for
+    --set: floats always with a point, groups as { k = v; }, lists of groups
+    as ( ... ), lists of scalars as [ ... ]."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        t = repr(v)
+        return t if any(c in t for c in ".eEn") else t + ".0"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, dict):
+        return "{ " + " ".join("%s = %s;" % (k, libconfig_value(x)) for k, x in v.items()) + " }"
+    if isinstance(v, list):
+        inner = ", ".join(libconfig_value(x) for x in v)
+        return ("( %s )" if any(isinstance(x, (dict, list)) for x in v) else "[%s]") % inner
+    raise TypeError(v)
+
+
+def run_scene(outdir):
+    """The resolved scene of a run folder written by ./run (the scene file in
+    OUT/scene.path and its --set list in OUT/scene.sets), or None."""
+    try:
+        path = open(os.path.join(outdir, "scene.path")).read().strip()
+        sets_path = os.path.join(outdir, "scene.sets")
+        sets = [ln for ln in open(sets_path).read().splitlines() if ln] if os.path.exists(sets_path) else []
+        return resolved_scene(path, sets)
+    except (OSError, SceneError):
+        return None
+
+
 def read_scene_wheel_y(outdir):
-    """wheel.center[1] from a scene file copied into the run folder (the slip
-    sweep leaves scene.cfg there), or None."""
-    import re
-    for name in sorted(os.listdir(outdir)):
-        if not name.endswith(".cfg"):
-            continue
-        text = open(os.path.join(outdir, name)).read()
-        text = re.sub(r"#[^\n]*|//[^\n]*", "", text)
-        m = re.search(r"\bwheel\s*[=:]\s*\{(.*?)\}\s*;", text, re.S)
-        if not m:
-            continue
-        c = re.search(r"\bcenter\s*[=:]\s*\[\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*,\s*([-+0-9.eE]+)\s*\]", m.group(1))
-        if c:
-            return float(c.group(2))
-    return None
+    """wheel.center[1] of the scene a run folder was run with, or None."""
+    scene = run_scene(outdir)
+    try:
+        return float(scene_get(scene, "wheel.center")[1]) if scene else None
+    except (KeyError, IndexError, TypeError):
+        return None
 
 
 class Stat:

@@ -39,7 +39,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, os.path.join(ROOT, "bench", "post"))
 
-import scenecfg  # noqa: E402
+import runio  # noqa: E402
 
 QUANTITIES = ("drawbar_coefficient", "gross_traction_coefficient", "running_resistance_coefficient",
               "sinkage_per_radius", "drawbar_pull", "gross_traction", "sinkage", "deflection", "contact_time",
@@ -80,8 +80,11 @@ def parse_tolerance(text):
 
 def target_of(scene_path, accuracy):
     """(quantity, tolerance, study name)."""
-    text = open(scene_path).read()
     study = os.path.splitext(os.path.basename(scene_path))[0]
+    try:  # the scene as the servers read it (fem_server --print-config=json)
+        scene = runio.resolved_scene(scene_path)
+    except runio.SceneError as e:
+        raise Refusal(2, str(e))
     if accuracy:
         if "=" not in accuracy:
             raise Refusal(2, "--accuracy %s: expected QUANTITY=TOLERANCE, e.g. drawbar_pull=5%%" % accuracy)
@@ -92,13 +95,13 @@ def target_of(scene_path, accuracy):
                              "not a percentage" % (q, q))
     else:
         try:
-            q = scenecfg.get(text, "run.target.quantity").strip().strip('"')
-            tol = parse_tolerance(scenecfg.get(text, "run.target.tolerance"))
+            q = str(runio.scene_get(scene, "run.target.quantity")).strip()
+            tol = parse_tolerance(str(runio.scene_get(scene, "run.target.tolerance")))
         except KeyError:
             raise Refusal(2, "%s: no run.target (quantity, tolerance) and no --accuracy" % scene_path)
     try:
-        study = scenecfg.get(text, "run.target.study").strip().strip('"') or study
-    except (KeyError, scenecfg.SceneError):
+        study = str(runio.scene_get(scene, "run.target.study")).strip() or study
+    except KeyError:
         pass
     if q not in QUANTITIES:
         raise Refusal(2, "quantity %r is not one the study measures (%s)" % (q, ", ".join(QUANTITIES)))

@@ -314,7 +314,7 @@ static int print_config_resolves_overrides(void)
     ENSURE(cm_scene_add_override("coupling.dt=2e-5", &err) == CM_OK);
     FILE *o = fdopen(fo, "w");
     ENSURE(o != NULL);
-    ENSURE_MSG(cm_scene_print_config(path, o, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_print_config(path, 0, o, &err) == CM_OK, "%s", err.msg);
     fclose(o);
     cm_scene_clear_overrides();
     cm_scene *s;
@@ -329,15 +329,55 @@ static int print_config_resolves_overrides(void)
     ENSURE(cm_scene_length(s, "dem.layers") == 2);
     cm_scene_close(&s);
     /* A missing file: an error naming it, nothing printed. */
-    ENSURE(cm_scene_print_config("/nonexistent/scene.cfg", stdout, &err) != CM_OK);
+    ENSURE(cm_scene_print_config("/nonexistent/scene.cfg", 1, stdout, &err) != CM_OK);
     ENSURE_MSG(strstr(err.msg, "/nonexistent/scene.cfg"), "%s", err.msg);
     remove(path);
     remove(out);
     return 0;
 }
 
+/* --print-config=json: the resolved scene as JSON (what bench/post/runio.py
+ * reads): groups as objects, lists and arrays as arrays, floats with a point
+ * and 17 digits (read back bit for bit), strings quoted and escaped, the
+ * overrides applied. */
+static int print_config_json(void)
+{
+    char path[] = "/tmp/test_scene_js_XXXXXX";
+    int fd = mkstemp(path);
+    ENSURE(fd >= 0);
+    FILE *f = fdopen(fd, "w");
+    ENSURE(f != NULL);
+    fputs(k_scene, f);
+    fputs("fem = { note = \"a \\\"quoted\\\" word\"; };\n", f);
+    fclose(f);
+    cm_error err = {0};
+    ENSURE(cm_scene_add_override("run.end_time=0.25", &err) == CM_OK);
+    ENSURE(cm_scene_add_override("dem.gravity=[1, 0.0, -9.81]", &err) == CM_OK);
+    char *text = NULL;
+    size_t len = 0;
+    FILE *o = open_memstream(&text, &len);
+    ENSURE(o != NULL);
+    ENSURE_MSG(cm_scene_print_config(path, 1, o, &err) == CM_OK, "%s", err.msg);
+    fclose(o);
+    cm_scene_clear_overrides();
+    remove(path);
+    static const char *const want[] = {
+        "\"run\": {", "\"name\": \"demo\"", "\"end_time\": 0.25", "\"E\": 50000000,",
+        "\"gravity\": [1.0, 0.0, -9.8100000000000005]", "\"layers\": [{", "\"radius\": 0.0030000000000000001",
+        "\"verbose\": true", "\"note\": \"a \\\"quoted\\\" word\""};
+    for (size_t k = 0; k < sizeof want / sizeof want[0]; k++)
+        ENSURE_MSG(strstr(text, want[k]), "missing %s in:\n%s", want[k], text);
+    ENSURE(text[0] == '{' && text[len - 2] == '}' && text[len - 1] == '\n');
+    double g2 = 0;
+    const char *g = strstr(text, "-9.81");
+    ENSURE(g && sscanf(g, "%lf", &g2) == 1 && g2 == -9.81);
+    free(text);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"reads_values", reads_values},
+    {"print_config_json", print_config_json},
     {"missing_key_names_key_and_line", missing_key_names_key_and_line},
     {"out_of_range_names_key_and_line", out_of_range_names_key_and_line},
     {"wrong_type_is_refused", wrong_type_is_refused},

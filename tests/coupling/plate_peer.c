@@ -12,7 +12,8 @@
  * and reads `run` and `coupling` like the servers. Every exchange it writes
  * t, Fx, Fy, Fz, contacts (the resultant of the nodal forces on the plate)
  * to DIR/plate.csv, and at the end prints the impulse, the contact duration
- * and the peak of the load (the downward force the grains put on the plate).
+ * and the peak of the load (the downward force the grains put on the plate),
+ * also written to DIR/plate_run.json (common/runrec.h).
  * After its first exchange it writes its pid to DIR/plate_peer.running. */
 #include <math.h>
 #include <signal.h>
@@ -22,6 +23,7 @@
 
 #include "ipc.h"
 #include "runcfg.h"
+#include "runrec.h"
 #include "scene.h"
 
 static volatile sig_atomic_t g_stop;
@@ -165,8 +167,19 @@ int main(int argc, char **argv)
         ipc_close(&ch, rc);
         return g_stop ? 128 + (int)g_stop : 3;
     }
-    printf("[plate] impulse %.9g N s, contact duration %.9g s, peak force %.9g N\n", impulse,
-           t_first >= 0 ? t_last - t_first : 0.0, f_max);
+    const double duration = t_first >= 0 ? t_last - t_first : 0.0;
+    printf("[plate] impulse %.9g N s, contact duration %.9g s, peak force %.9g N\n", impulse, duration, f_max);
     ipc_close(&ch, IPC_OK);
+    /* The same for scripts (bench/study/run): DIR/plate_run.json */
+    cm_run_record rec = {0};
+    cm_runrec_text(&rec, "program", "plate_peer");
+    cm_runrec_num(&rec, "impulse", impulse);
+    cm_runrec_num(&rec, "contact_time", duration);
+    cm_runrec_num(&rec, "peak_force", f_max);
+    snprintf(path, sizeof path, "%s/plate_run.json", out);
+    if (cm_runrec_write(&rec, path, &err)) {
+        fprintf(stderr, "[plate] error: %s\n", err.msg);
+        return 1;
+    }
     return 0;
 }

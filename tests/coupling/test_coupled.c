@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "proc.h"
+#include "hertz.h"
 #include "test.h"
 
 #if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR) || !defined(PLATE_PEER_PATH)
@@ -90,11 +91,10 @@ typedef struct hertz {
 static hertz hertz_sphere_plane(double r, double rho, double E1, double nu1, double E2, double nu2, double v)
 {
     hertz h;
-    h.m = rho * 4.0 / 3.0 * M_PI * r * r * r;
-    h.estar = 1.0 / ((1 - nu1 * nu1) / E1 + (1 - nu2 * nu2) / E2);
-    h.dmax = pow(15.0 * h.m * v * v / (16.0 * h.estar * sqrt(r)), 0.4);
-    h.tc = 2.943 * h.dmax / v; /* 2.9432 to four digits */
-    h.fmax = 4.0 / 3.0 * h.estar * sqrt(r) * pow(h.dmax, 1.5);
+    h.m = sphere_mass(rho, r);
+    h.estar = hertz_e_star(E1, nu1, E2, nu2);
+    const hertz_ref c = hertz_closed_form(h.estar, r, h.m, v);
+    h.dmax = c.dmax, h.tc = c.tc, h.fmax = c.fmax;
     return h;
 }
 
@@ -228,6 +228,36 @@ static int last_row(const char *dir, const char *const *cols, double *vals, int 
 /* The whole pipeline on a small tire and bed: sinkage to the load, travel,
  * summary. The nodal forces the FEM receives balance the DEM's contact totals
  * to round-off, and both sides agree on the interface work. */
+/* A server's run record (DIR/NAME, common/runrec.h): the number after
+ * "key": (0 when found), and its text. */
+static int record_num(const char *dir, const char *name, const char *key, double *v)
+{
+    char path[400], text[8192], pat[80];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return -1;
+    size_t n = fread(text, 1, sizeof text - 1, f);
+    fclose(f);
+    text[n] = '\0';
+    snprintf(pat, sizeof pat, "\"%s\": ", key);
+    const char *p = strstr(text, pat);
+    return p && sscanf(p + strlen(pat), "%lf", v) == 1 ? 0 : -1;
+}
+
+static int record_has(const char *dir, const char *name, const char *needle)
+{
+    char path[400], text[8192];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return 0;
+    size_t n = fread(text, 1, sizeof text - 1, f);
+    fclose(f);
+    text[n] = '\0';
+    return strstr(text, needle) != NULL;
+}
+
 static int tire_small_runs(void)
 {
     launch l;
@@ -262,6 +292,18 @@ static int tire_small_runs(void)
     ENSURE_REL(wd, v[0], 1e-5);
     ENSURE_REL(wf, v[1], 1e-5);
     ENSURE_NEAR(gap, v[1] - v[0], 0.01 * fabs(v[1] - v[0]) + 1e-12);
+    /* The run records (what scripts read instead of the logs): both sides
+     * ended well, after the same exchanges, one per traction.csv row. */
+    double dem_ex = 0, fem_ex = 0, dem_rc = 1, fem_rc = 1, tets = 0, lim = 0;
+    ENSURE(record_num(l.out, "dem_run.json", "exchanges", &dem_ex) == 0 &&
+           record_num(l.out, "fem_run.json", "exchanges", &fem_ex) == 0);
+    ENSURE(record_num(l.out, "dem_run.json", "exit_code", &dem_rc) == 0 && dem_rc == 0);
+    ENSURE(record_num(l.out, "fem_run.json", "exit_code", &fem_rc) == 0 && fem_rc == 0);
+    ENSURE(record_num(l.out, "fem_run.json", "tets", &tets) == 0 && tets > 100);
+    ENSURE(record_num(l.out, "fem_run.json", "dt_limit", &lim) == 0 && lim > 0);
+    ENSURE_MSG(dem_ex == fem_ex && dem_ex == rows, "exchanges: DEM %g, FEM %g, traction.csv %d rows", dem_ex, fem_ex,
+               rows);
+    ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"\""));
     ENSURE(shm_clean(&l));
     return 0;
 }
@@ -279,6 +321,9 @@ static int tire_unstable_exchange_stopped(void)
     ENSURE(l.status != 0);
     ENSURE(strstr(log, "[fem] error: coupling unstable") && strstr(log, "reduce coupling.dt"));
     ENSURE(strstr(log, "[dem] error: peer fem failed"));
+    /* The run records say the same (bench/study/run reads these). */
+    ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"coupling unstable"));
+    ENSURE(record_has(l.out, "dem_run.json", "\"error\": \"peer fem failed"));
     ENSURE(shm_clean(&l));
     return 0;
 }

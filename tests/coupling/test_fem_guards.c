@@ -17,10 +17,8 @@
  *   the peer's bad data named (exchange, node, component), not report an
  *   unstable tire.
  * The runs go through the launcher and wait for it with system() or
- * waitpid(): no polling, no sleeps. */
+ * tests/proc.h: no polling for short-lived states, no sleeps. */
 #include <math.h>
-#include <fcntl.h>
-#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -29,6 +27,7 @@
 #include <unistd.h>
 
 #include "fem_exchange.h"
+#include "proc.h"
 #include "test.h"
 
 #if !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR)
@@ -123,8 +122,6 @@ static int tire_moderate_interval_passes(void)
     return 0;
 }
 
-extern char **environ;
-
 static int peer_nan_force_named(void)
 {
     char name[64], out[256], log[300];
@@ -134,13 +131,8 @@ static int peer_nan_force_named(void)
     mkdir(out, 0755);
     const char *argv[] = {DEMFEM_BUILD_DIR "/fem_server/fem_server", "--scene",
                           DEMFEM_SOURCE_DIR "/tests/coupling/scenes/tire_small.cfg", "--shm", name, "--out", out, NULL};
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    pid_t pid;
-    ENSURE(posix_spawn(&pid, argv[0], &fa, NULL, (char *const *)argv, environ) == 0);
-    posix_spawn_file_actions_destroy(&fa);
+    tp_proc fem;
+    ENSURE(tp_spawn(&fem, argv, log, 0) == 0);
     /* The DEM side: attach (the library waits for the segment), one frame. */
     ipc_attach_def def = ipc_default_attach_def();
     def.dt = 1e-5;
@@ -166,13 +158,12 @@ static int peer_nan_force_named(void)
     const double *f;
     ENSURE(ipc_recv(ch, &in, &f) != IPC_OK); /* fem_server failed the channel */
     ipc_close(&ch, IPC_OK);
-    int st;
-    ENSURE(waitpid(pid, &st, 0) == pid);
+    const int status = tp_finish(&fem, 600);
     const char *text = slurp(log);
     ENSURE(text != NULL);
-    if (!WIFEXITED(st) || WEXITSTATUS(st) != 1 || !strstr(text, "sent bad data"))
+    if (status != 1 || !strstr(text, "sent bad data"))
         fprintf(stderr, "---- %s ----\n%s----\n", log, text);
-    ENSURE(WIFEXITED(st) && WEXITSTATUS(st) == 1);
+    ENSURE(status == 1);
     ENSURE(strstr(text, "error: dem_server sent bad data at exchange 0 (t = 0.000000 s): the force on interface "
                         "node 7 (z) is nan"));
     ENSURE(!strstr(text, "unstable"));

@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "dem.h"
+#include "hertz.h"
 #include "test.h"
 
 static inline dem_material test_material(double E, double nu, double e, double mu)
@@ -33,20 +34,6 @@ static inline dem_world *test_world(const dem_material *m, int n_mat, double dt,
         return NULL;
     }
     return w;
-}
-
-/* Hertz closed form for a normal impact at relative speed v. */
-typedef struct hertz_ref {
-    double dmax, tc, fmax;
-} hertz_ref;
-
-static inline hertz_ref hertz_closed_form(double Es, double Rs, double ms, double v)
-{
-    hertz_ref h;
-    h.dmax = pow(15.0 * ms * v * v / (16.0 * Es * sqrt(Rs)), 0.4);
-    h.tc = 2.943 * h.dmax / v;
-    h.fmax = 4.0 / 3.0 * Es * sqrt(Rs) * pow(h.dmax, 1.5);
-    return h;
 }
 
 static inline double e_star_same(const dem_material *m)

@@ -73,7 +73,7 @@ static int hertz_sphere_sphere(void)
 {
     dem_material m = test_material(5e7, 0.3, 1.0, 0.0);
     double v = 0.5; /* each: relative speed 1 */
-    double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
+    double mass = sphere_mass(m.density, R0);
     hertz_ref h = hertz_closed_form(e_star_same(&m), R0 / 2, mass / 2, 2 * v);
     dem_world *w = test_world(&m, 1, h.tc / 500, 2, NULL, 1);
     ENSURE(w);
@@ -95,7 +95,7 @@ static int hertz_sphere_wall(void)
 {
     dem_material m = test_material(5e7, 0.3, 1.0, 0.0);
     double v = 1.0;
-    double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
+    double mass = sphere_mass(m.density, R0);
     hertz_ref h = hertz_closed_form(e_star_same(&m), R0, mass, v);
     dem_world *w = test_world(&m, 1, h.tc / 500, 1, NULL, 1);
     ENSURE(w);
@@ -125,7 +125,7 @@ static int restitution_sweep(void)
         for (int model = 0; model < 2; model++)
             for (int pair = 0; pair < 2; pair++) {
                 dem_material m = test_material(5e7, 0.3, es[k], 0.0);
-                double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
+                double mass = sphere_mass(m.density, R0);
                 hertz_ref h = pair ? hertz_closed_form(e_star_same(&m), R0 / 2, mass / 2, 1.0)
                                    : hertz_closed_form(e_star_same(&m), R0, mass, 1.0);
                 dem_world_def d = dem_world_def_default();
@@ -167,7 +167,7 @@ static int oblique_impact(void)
          * from the centre, and the rigid closed form assumes r; at E = 5e7 Pa
          * that lowers ω' by 2.5 %, at 5e9 Pa by 0.4 % */
         dem_material m = test_material(5e9, 0.3, e, mu);
-        double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
+        double mass = sphere_mass(m.density, R0);
         hertz_ref h = hertz_closed_form(e_star_same(&m), R0, mass, vn);
         dem_world *w = test_world(&m, 1, h.tc / 400, 1, NULL, 1);
         ENSURE(w);
@@ -213,8 +213,8 @@ static int tilted_plane(void)
         dem_world *w = test_world(&m, 1, 2e-6, 1, g, 1);
         ENSURE(w);
         cm_error err = {0};
-        double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
-        double dstat = pow(mass * gmag * cos(th) / (4.0 / 3.0 * e_star_same(&m) * sqrt(R0)), 2.0 / 3.0);
+        double mass = sphere_mass(m.density, R0);
+        double dstat = hertz_static_overlap(e_star_same(&m), R0, mass * gmag * cos(th));
         double x[3] = {0, 0, R0 - dstat}, p[3] = {0, 0, 0}, n[3] = {0, 0, 1};
         ENSURE(dem_grain_add(w, x, R0, 0, NULL, &err) == 0 && dem_wall_add(w, p, n, 0, &err) == 0);
         int n1 = 10000, n2 = 30000;
@@ -342,8 +342,8 @@ static int rolling_resistance(void)
         dem_world *w = test_world(&m, 1, 2e-6, 1, g, 1);
         ENSURE(w);
         cm_error err = {0};
-        double mass = m.density * 4.0 / 3.0 * M_PI * R0 * R0 * R0;
-        double dstat = pow(mass * 9.81 / (4.0 / 3.0 * e_star_same(&m) * sqrt(R0)), 2.0 / 3.0);
+        double mass = sphere_mass(m.density, R0);
+        double dstat = hertz_static_overlap(e_star_same(&m), R0, mass * 9.81);
         double x[3] = {0, 0, R0 - dstat}, p[3] = {0, 0, 0}, n[3] = {0, 0, 1}, v[3] = {0.2, 0, 0},
                om[3] = {0, 0.2 / R0, 0};
         ENSURE(dem_grain_add(w, x, R0, 0, NULL, &err) == 0 && dem_wall_add(w, p, n, 0, &err) == 0);

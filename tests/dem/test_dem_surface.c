@@ -502,7 +502,7 @@ static int fine_mesh_landing(void)
     const double s = RS / 25.0, v = 0.5;
     const int nx = 60; /* ±1.2 R */
     dem_material steel = {.density = 7800.0, .young = 2.1e11, .poisson = 0.3, .restitution = 1.0};
-    double m = steel.density * 4.0 / 3.0 * M_PI * RS * RS * RS;
+    double m = sphere_mass(steel.density, RS);
     hertz_ref h = hertz_closed_form(e_star_steel_rubber(), RS, m, v);
     double land[][2] = {{0, 0}, {0.5 * s, 0}, {s / 3.0, s / 5.0}, {0.5 * s, 0.5 * s}};
     const char *what[] = {"vertex", "edge", "face", "diagonal"};
@@ -562,7 +562,7 @@ static int folded_surface(dem_world *w, double deg, double s)
 static int concave_corner_contacts(void)
 {
     const double delta = 0.01 * RS, s = RS / 3.0;
-    double fh = 4.0 / 3.0 * e_star_steel_rubber() * sqrt(RS) * pow(delta, 1.5);
+    double fh = hertz_force(e_star_steel_rubber(), RS, delta);
     double angles[] = {90.0, 120.0, 170.0};
     int expect[] = {2, 2, 1};
     for (int k = 0; k < 3; k++) {

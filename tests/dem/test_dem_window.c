@@ -566,8 +566,16 @@ static const test_case tests[] = {
     {"frozen_grains", frozen_grains},
     {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},
+};
+
+/* Measurements, not tests (they print the figures the tolerances above were
+ * chosen from and assert nothing; minutes each): run by naming them. */
+static const test_case measurements[] = {
     {"window_seed_noise", window_seed_noise},
     {"freeze_distance_sweep", freeze_distance_sweep},
 };
 
-int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }
+int main(int argc, char **argv)
+{
+    return test_main_measure(argc, argv, tests, TEST_COUNT(tests), measurements, TEST_COUNT(measurements));
+}

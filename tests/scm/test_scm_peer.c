@@ -14,32 +14,20 @@
  * Processes are stopped by the pid this test started; the moment to kill is
  * signalled by the FEM side through a pipe after 20 exchanges. */
 #include <errno.h>
-#include <fcntl.h>
 #include <math.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/wait.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "ipc.h"
+#include "proc.h"
 #include "test.h"
 
 #if !defined(SCM_SERVER_PATH) || !defined(DEMFEM_SOURCE_DIR) || !defined(DEMFEM_BUILD_DIR)
 #error "SCM_SERVER_PATH, DEMFEM_SOURCE_DIR and DEMFEM_BUILD_DIR must be defined"
 #endif
-
-extern char **environ;
-
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 /* Soil of the scene below (dry sand defaults, z_reg 1e-4 < 1 cm). */
 static const double k_c = 0.99e3, k_phi = 1528.43e3, n_exp = 1.1, depth = 0.01, side = 0.1, h0 = 0.08;
@@ -67,47 +55,17 @@ static int write_scene(run_files *f, const char *tag, double end_time)
     return fclose(s);
 }
 
-static pid_t spawn_scm(const run_files *f)
+static int spawn_scm(tp_proc *p, const run_files *f)
 {
     const char *argv[] = {SCM_SERVER_PATH, "--scene", f->scene, "--shm", f->shm, "--out", f->out, NULL};
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, f->log, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    pid_t pid;
-    int rc = posix_spawn(&pid, argv[0], &fa, NULL, (char *const *)argv, environ);
-    posix_spawn_file_actions_destroy(&fa);
-    return rc ? -1 : pid;
-}
-
-/* Waits for a child's exit (at most timeout s); its exit code, 128 + signal, or -1. */
-static int wait_exit(pid_t pid, double timeout)
-{
-    double t0 = now();
-    for (;;) {
-        int st;
-        pid_t r = waitpid(pid, &st, WNOHANG);
-        if (r == pid)
-            return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-        if (now() - t0 > timeout) {
-            kill(pid, SIGKILL);
-            waitpid(pid, &st, 0);
-            return -1;
-        }
-        struct timespec ts = {0, 2000000};
-        nanosleep(&ts, NULL);
-    }
+    return tp_spawn(p, argv, f->log, 0);
 }
 
 static const char *read_log(const run_files *f)
 {
-    static char buf[1 << 15];
-    FILE *s = fopen(f->log, "r");
-    size_t n = s ? fread(buf, 1, sizeof buf - 1, s) : 0;
-    if (s)
-        fclose(s);
-    buf[n] = '\0';
-    return buf;
+    tp_proc p = {.pid = -1};
+    snprintf(p.log, sizeof p.log, "%s", f->log);
+    return tp_log_text(&p);
 }
 
 static int shm_gone(const run_files *f)
@@ -120,8 +78,9 @@ static int shm_gone(const run_files *f)
 /* The FEM side, in the forked child. Serves the plate; after 20 exchanges
  * writes one byte to notify_fd (if >= 0). Exit codes: 0 a clean finish with
  * every force as the closed form; 10 a force off; 42 the peer died; 1 other. */
-static int fem_side(const run_files *f, int notify_fd)
+static int fem_side(void *arg, int notify_fd)
 {
+    const run_files *f = arg;
     ipc_create_def def = ipc_default_create_def();
     def.n_nodes = 4;
     def.n_tris = 2;
@@ -186,8 +145,8 @@ static int fem_side(const run_files *f, int notify_fd)
         }
         if ((rc = ipc_send_commit(ch)) || kind == IPC_FRAME_FINISH)
             break;
-        if (n == 20 && notify_fd >= 0 && write(notify_fd, "x", 1) != 1)
-            return 1;
+        if (n == 20)
+            tp_announce(notify_fd, 'x');
     }
     if (rc) {
         fprintf(stderr, "fem side: %s\n", ipc_error(ch));
@@ -202,13 +161,10 @@ static int plate_through_protocol(void)
 {
     run_files f;
     ENSURE(write_scene(&f, "plate", 50 * dt) == 0);
-    pid_t fem = fork();
-    ENSURE(fem >= 0);
-    if (fem == 0)
-        _exit(fem_side(&f, -1));
-    pid_t scm = spawn_scm(&f);
-    ENSURE(scm > 0);
-    int scm_rc = wait_exit(scm, 60), fem_rc = wait_exit(fem, 60);
+    tp_proc fem, scm;
+    ENSURE(tp_fork(&fem, fem_side, &f, 0) == 0);
+    ENSURE(spawn_scm(&scm, &f) == 0);
+    int scm_rc = tp_finish(&scm, 60), fem_rc = tp_finish(&fem, 60);
     if (scm_rc != 0 || fem_rc != 0)
         fprintf(stderr, "---- %s ----\n%s----\n", f.log, read_log(&f));
     ENSURE(scm_rc == 0);
@@ -228,32 +184,25 @@ static int plate_through_protocol(void)
 static int kill_one(const char *tag, int kill_fem, int *survivor_rc, double *reaction, run_files *f)
 {
     ENSURE(write_scene(f, tag, 1e6) == 0);
-    int fds[2];
-    ENSURE(pipe(fds) == 0);
-    pid_t fem = fork();
-    ENSURE(fem >= 0);
-    if (fem == 0) {
-        close(fds[0]);
-        _exit(fem_side(f, fds[1]));
+    tp_proc fem, scm;
+    ENSURE(tp_fork(&fem, fem_side, f, TP_READY) == 0);
+    if (spawn_scm(&scm, f) != 0) {
+        tp_kill(&fem);
+        ENSURE_MSG(0, "cannot start %s", SCM_SERVER_PATH);
     }
-    close(fds[1]);
-    pid_t scm = spawn_scm(f);
-    ENSURE(scm > 0);
-    char c;
-    ssize_t got = read(fds[0], &c, 1); /* blocks until the 20th exchange (or the FEM side's end) */
-    close(fds[0]);
-    if (got != 1) {
-        kill(scm, SIGKILL);
-        kill(fem, SIGKILL);
-        wait_exit(scm, 10), wait_exit(fem, 10);
-        fprintf(stderr, "---- %s ----\n%s----\n", f->log, read_log(f));
+    /* until the 20th exchange, or EOF when the FEM side ends first */
+    if (tp_wait_ready(&fem, 'x', 600) != 0) {
+        tp_kill(&scm);
+        tp_kill(&fem);
+        tp_print_log(&scm);
         ENSURE_MSG(0, "the run did not reach 20 exchanges");
     }
-    ENSURE(kill(kill_fem ? fem : scm, SIGKILL) == 0);
-    double t0 = now();
-    int killed_rc = wait_exit(kill_fem ? fem : scm, 10);
-    *survivor_rc = wait_exit(kill_fem ? scm : fem, 20);
-    *reaction = now() - t0;
+    tp_proc *victim = kill_fem ? &fem : &scm, *survivor = kill_fem ? &scm : &fem;
+    ENSURE(kill(victim->pid, SIGKILL) == 0);
+    double t0 = tp_now();
+    int killed_rc = tp_finish(victim, 10);
+    *survivor_rc = tp_finish(survivor, 20);
+    *reaction = tp_now() - t0;
     ENSURE(killed_rc == 128 + SIGKILL);
     unlink(f->scene);
     return 0;

@@ -19,8 +19,9 @@ BUILD = sys.argv[2] if len(sys.argv) > 2 else os.path.join(ROOT, "build")
 
 
 def choose(scene, *args):
+    # choose.py reads the scene through fem_server --print-config=json of this build
     p = subprocess.run([sys.executable, CHOOSE, scene, "--results", RESULTS] + list(args), capture_output=True,
-                       text=True)
+                       text=True, env=dict(os.environ, DEMFEM_BUILD_DIR=BUILD))
     return p.returncode, p.stdout.split("\n")[:-1], p.stderr
 
 

@@ -16,12 +16,14 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 RESULTS = os.path.join(HERE, "results_coef")
 CHOOSE = os.path.join(ROOT, "bench", "study", "choose.py")
+BUILD = sys.argv[2] if len(sys.argv) > 2 else os.path.join(ROOT, "build")
 TIRE = os.path.join(ROOT, "tests", "coupling", "scenes", "tire_small.cfg")
 
 
 def choose(scene, *args):
+    # choose.py reads the scene through fem_server --print-config=json of this build
     p = subprocess.run([sys.executable, CHOOSE, scene, "--results", RESULTS] + list(args), capture_output=True,
-                       text=True)
+                       text=True, env=dict(os.environ, DEMFEM_BUILD_DIR=BUILD))
     return p.returncode, p.stdout.split("\n")[:-1], p.stderr
 
 

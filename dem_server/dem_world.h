@@ -56,11 +56,18 @@ typedef struct dem_grains {
  * contributions in ascending pair index, as one thread does (dem_pairs.c):
  * grains in T blocks of slots, a pair owned by the block of its i. Rebuilt
  * with every neighbour list; nothing in it for one thread. */
-enum { DEM_PLAN_BLOCKS_PER_THREAD = 4 };
+/* Blocks of slots per thread. More than one lets a free thread take another
+ * block while one shares its core with fem_server, but grains sorted by cell
+ * (z slowest) make slot ranges thin layers of a flat bed, and every boundary
+ * adds a layer of stored cross pairs; slabs in space instead scatter each
+ * block's pairs over the whole list. Measured on bench_dem's bed (idle, 2
+ * threads): 4 blocks 1.0-1.4e7, 1 block 1.2e7 grain-steps/s, x slabs 0.55e7.
+ * A Morton order of the grains would give compact slot ranges. */
+enum { DEM_PLAN_BLOCKS_PER_THREAD = 1 };
 
 typedef struct dem_pair_plan {
-    int valid;
-    int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
+    int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
+    int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */
     int *own, own_cap;  /* active pairs grouped by block, ascending p inside: own[own_start[t] ..] */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */

@@ -14,9 +14,8 @@
  *              merged by p (phase B), so that each grain adds its
  *              contributions in ascending p, as the single loop does.
  * The result is bit-identical for any thread count; only the few pairs
- * across a block boundary are stored. There are a few blocks per thread,
- * taken by whichever thread is free, so that a thread sharing its core with
- * fem_server does not hold the others up. */
+ * across a block boundary are stored. Blocks go to whichever thread is free
+ * (DEM_PLAN_BLOCKS_PER_THREAD, dem_world.h, says how many there are). */
 #include <limits.h>
 #include <math.h>
 #include <stdlib.h>

@@ -39,7 +39,6 @@
 #define DEM_MAX_WALLS 16
 
 typedef struct dem_world dem_world;
-typedef struct cm_scene cm_scene;
 
 /* ---- Materials -------------------------------------------------------- */
 
@@ -292,128 +291,8 @@ const dem_world_def *dem_world_get_def(const dem_world *w);
 const dem_material *dem_world_material(const dem_world *w, int k);
 int dem_world_material_count(const dem_world *w);
 
-/* ---- Bed generation --------------------------------------------------- */
-
-#define DEM_MAX_LAYERS 8
-
-/* Shape of the grains of a bed layer. Sizes are relative: each grain is
- * scaled so that its volume-equivalent radius is the layer's drawn radius
- * (same mass as the sphere of that radius). */
-typedef struct dem_bed_shape {
-    int type;               /* enum dem_shape_type; DEM_SHAPE_SPHERE (0) = spheres */
-    double semi_axes[3];    /* ellipsoid: axis ratios */
-    int n_verts;            /* polyhedron: explicit vertices (relative), or 0 = random angular grains */
-    double verts[DEM_SHAPE_MAX_VERTS][3];
-    double elongation;      /* random grains: long / short axis ratio, >= 1 */
-    int random_verts;       /* random grains: vertices per grain */
-    int variants;           /* random grains: distinct shapes in the layer */
-} dem_bed_shape;
-
-typedef struct dem_bed_layer {
-    int count;          /* grains in the layer */
-    double radius[2];   /* radius range [min, max], m, uniform distribution (volume-equivalent for shapes) */
-    dem_bed_shape shape; /* zero-initialised = spheres */
-} dem_bed_layer;
-
-typedef struct dem_bed_params {
-    double box_min[3], box_max[3]; /* m: floor at box_min[2], side walls at x/y limits */
-    int n_layers;                  /* listed bottom to top (paper: finest on top) */
-    dem_bed_layer layers[DEM_MAX_LAYERS];
-    int material;                  /* grain material */
-    int wall_material;
-    bool side_walls;               /* add the four side walls (the floor is always added) */
-    uint64_t seed;
-    double fill_fraction;          /* solid fraction of the loose initial placement */
-    double settle_ke;              /* J per grain: settled when KE/grain falls below */
-    double settle_min_time;        /* s, settle at least this long */
-    double settle_max_time;        /* s, fail if not settled by then */
-    double settle_dt;              /* s, step used while settling (<= 0: the world's dt) */
-    char file[1024];               /* HDF5 cache; "" = none */
-} dem_bed_params;
-
-dem_bed_params dem_bed_params_default(void);
-
-/* Progress callback during settling (may be NULL); return nonzero to abort. */
-typedef int (*dem_bed_progress)(dem_world *w, void *user);
-
-/* Fills w (which must hold no grains) with a settled bed: loads params->file
- * when it exists and its stored parameters and settling-code fingerprint
- * match, otherwise places grains randomly without overlap, lets them settle
- * under gravity (in a scratch world with w's settings and walls) and saves
- * the file. Either way w receives the bed as stored (id order, at rest, no
- * springs), so a run is the same whether its bed was cached or not.
- * Adds the floor (and side walls) to w. *loaded tells which happened. */
-int dem_bed_build(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user, bool *loaded,
-                  cm_error *err);
-/* The pieces, for tests. */
-int dem_bed_place(dem_world *w, const dem_bed_params *params, cm_error *err);
-int dem_bed_settle(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user,
-                   cm_error *err);
-int dem_bed_save(const dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
-/* CM_OK when loaded; CM_ERR_STATE, the reason in err, when the file's
- * parameters differ or it was settled by other code (its settling-code
- * fingerprint, a miniature of the bed settled by this build, differs);
- * another error when the file cannot be read. */
-int dem_bed_load(dem_world *w, const dem_bed_params *params, const char *path, cm_error *err);
-/* Canonical text of everything that determines a bed (materials included). */
-void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf, int len);
-/* Bed surface height, m: mean over columns (2 r_max wide) of the highest grain top. */
-double dem_bed_height(const dem_world *w);
-
-/* ---- Output ----------------------------------------------------------- */
-
-typedef struct dem_output dem_output;
-/* Opens dir/dem_grains.h5, dir/dem_grains.xmf and dir/dem_series.csv (dir is
- * created if needed; the dem_ prefix keeps them apart from fem_server's files). */
-int dem_output_open(const char *dir, dem_output **out, cm_error *err);
-int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err);  /* grain states */
-int dem_output_series(dem_output *o, const dem_world *w, cm_error *err); /* one line of KE, contacts */
-void dem_output_close(dem_output **o);
-/* Resuming: reopens the files of `dir` keeping the first `frames` frames and
- * `series_rows` series rows (what a killed run wrote after its checkpoint is
- * dropped), to continue them. */
-int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output **out, cm_error *err);
-/* Frames and series rows written so far. */
-void dem_output_counts(const dem_output *o, long *frames, long *series_rows);
-
-/* ---- Scene ------------------------------------------------------------ */
-
-typedef struct dem_wall_def {
-    double point[3], normal[3];
-    int material;
-} dem_wall_def;
-
-/* The terrain window (dem.window; dem_window.h): the second paper's terrain
- * replacement, the bed follows the wheel along +x. */
-typedef struct dem_window_def {
-    bool enabled;
-    double behind;           /* m: grains farther than this behind the wheel centre are removed */
-    double ahead;            /* m: the bed is kept at least this long ahead of the wheel centre */
-    double shift;            /* m: removal happens in steps of this; length of each appended stretch */
-    double sample_margin;    /* m: the appended stretch is taken this far inside the bed's end walls */
-    double freeze_distance;  /* m: grains farther than this from the wheel centre (along x) are frozen; 0 = never,
-                              * < 0 = DEM_WINDOW_FREEZE_LENGTHS contact lengths (dem_window.h) */
-    double expected_sinkage; /* m: for the footprint check at start */
-} dem_window_def;
-
-typedef struct dem_config {
-    dem_world_def world;
-    int n_materials;
-    dem_material materials[DEM_MAX_MATERIALS];
-    char material_names[DEM_MAX_MATERIALS][32];
-    int n_walls;
-    dem_wall_def walls[DEM_MAX_WALLS];
-    bool has_bed;
-    dem_bed_params bed;
-    char output_dir[1024]; /* "" = no output */
-    int output_every;      /* steps between grain frames */
-    int series_every;      /* steps between time-series lines */
-    dem_window_def window;
-} dem_config;
-
-/* Reads the `dem = { ... }` section (only that one) of a scene. */
-int dem_config_read(cm_scene *s, dem_config *c, cm_error *err);
-/* Creates the world of a config (materials, walls; not the bed). */
-int dem_world_from_config(const dem_config *c, dem_world **out, cm_error *err);
+/* The rest of the library's public interface, by job: dem_bed.h (settled
+ * beds and their cache), dem_output.h (grain states and series to HDF5/CSV),
+ * dem_config.h (the scene's dem section). */
 
 #endif

@@ -18,6 +18,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "dem_bed.h"
 #include "dem_world.h"
 #include "log.h"
 

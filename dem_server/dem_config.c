@@ -3,6 +3,8 @@
 #include <string.h>
 
 #include "dem.h"
+#include "dem_bed.h"
+#include "dem_config.h"
 #include "scene.h"
 
 static int material_by_name(const dem_config *c, cm_scene *s, const char *path, int *out, cm_error *err)

@@ -6,6 +6,7 @@
 #include <signal.h>
 
 #include "dem.h"
+#include "dem_config.h"
 #include "dem_window.h"
 #include "ipc.h"
 

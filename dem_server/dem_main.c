@@ -24,15 +24,18 @@
 
 #include "ckpt.h"
 #include "dem.h"
+#include "dem_bed.h"
 #include "dem_checkpoint.h"
+#include "dem_config.h"
 #include "dem_coupled.h"
+#include "dem_output.h"
 #include "dem_window.h"
 #include "h5io.h"
 #include "log.h"
 #include "runcfg.h"
 #include "runrec.h"
-#include "signals.h"
 #include "scene.h"
+#include "signals.h"
 #include "timer.h"
 
 /* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,

@@ -18,6 +18,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "dem_output.h"
 #include "dem_world.h"
 
 struct dem_output {

@@ -118,20 +118,6 @@ static inline __attribute__((always_inline)) void add_j(const force_sums *s, int
 /* First slot of block t: blocks are [n t / T, n (t + 1) / T). */
 static int block_lo(int t, int n, int nt) { return (int)((long)n * t / nt); }
 
-static int grow_int(int **a, int *cap, int need)
-{
-    if (need <= *cap)
-        return CM_OK;
-    int c = *cap ? *cap : 1024;
-    while (c < need)
-        c *= 2;
-    int *b = realloc(*a, (size_t)c * sizeof *b);
-    if (!b)
-        return CM_ERR_NOMEM;
-    *a = b, *cap = c;
-    return CM_OK;
-}
-
 /* Block of slot s: the t with block_lo(t) <= s < block_lo(t + 1). */
 static int owner(int s, int n, int nt)
 {
@@ -163,8 +149,8 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
         if (ti != tj)
             n_cross++;
     }
-    if (grow_int(&pl->own, &pl->own_cap, np) || grow_int(&pl->cross, &pl->cross_cap, n_cross) ||
-        grow_int(&pl->in, &pl->in_cap, n_cross))
+    if (dem_grow_ints(&pl->own, &pl->own_cap, np) || dem_grow_ints(&pl->cross, &pl->cross_cap, n_cross) ||
+        dem_grow_ints(&pl->in, &pl->in_cap, n_cross))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the pair plan (%d pairs)", w->step, np);
     if (n_cross > pl->cf_cap) {
         int c = pl->cf_cap ? pl->cf_cap : 256;

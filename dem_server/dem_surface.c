@@ -179,6 +179,7 @@ struct dem_surf_scratch {
     vec3 *nrm, *peff;
     int n_shared;                /* candidates after the kept ones that share their reaction */
     int grew_grain;              /* slot of the grain that last grew them this pass, -1 none */
+    int ccd_failed_grain, ccd_failed_tri; /* libccd failed on this grain and triangle this pass, -1 none */
     int nomem;                   /* a growth failed this pass */
     /* what the thread's contacts give the surface, in grain order, replayed
      * after the pass (surf_replay): per contact its totals (surf_rec), per
@@ -409,36 +410,38 @@ static inline void near_begin(near_iter *it, const dem_surface *s, vec3 c, doubl
     it->n_list = 0;
 }
 
+/* Triangle tt if its closest point to the centre lies within r: 1 and its
+ * region, barycentric weights, closest point and squared distance. */
+static inline int near_tri(const near_iter *it, int tt, int *t, int *region, double bary[3], double cp[3],
+                           double *d2)
+{
+    const dem_surface *s = it->s;
+    const int *tn = s->tri + 3 * tt;
+    int reg = dem_closest_on_triangle(it->p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
+    double dx = it->p[0] - cp[0], dy = it->p[1] - cp[1], dz = it->p[2] - cp[2];
+    double dd = dx * dx + dy * dy + dz * dz;
+    if (dd >= it->r2)
+        return 0;
+    *t = tt, *region = reg, *d2 = dd;
+    return 1;
+}
+
 /* The next triangle t within r: its region, barycentric weights and closest
  * point cp, and the squared distance d2. Returns 0 when there is none left. */
 static inline int near_next(near_iter *it, int *t, int *region, double bary[3], double cp[3], double *d2)
 {
     const dem_surface *s = it->s;
     if (it->list) { /* the listed triangles, in the order the tree would give them */
-        while (it->k < it->n_list) {
-            int tt = it->list[it->k++];
-            const int *tn = s->tri + 3 * tt;
-            int reg = dem_closest_on_triangle(it->p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
-            double dx = it->p[0] - cp[0], dy = it->p[1] - cp[1], dz = it->p[2] - cp[2];
-            double dd = dx * dx + dy * dy + dz * dz;
-            if (dd >= it->r2)
-                continue;
-            *t = tt, *region = reg, *d2 = dd;
-            return 1;
-        }
+        while (it->k < it->n_list)
+            if (near_tri(it, it->list[it->k++], t, region, bary, cp, d2))
+                return 1;
         return 0;
     }
     for (;;) {
         if (it->leaf && it->k < it->leaf->count) {
-            int tt = s->perm[it->leaf->first + it->k++];
-            const int *tn = s->tri + 3 * tt;
-            int reg = dem_closest_on_triangle(it->p, s->x + 3 * tn[0], s->x + 3 * tn[1], s->x + 3 * tn[2], bary, cp);
-            double dx = it->p[0] - cp[0], dy = it->p[1] - cp[1], dz = it->p[2] - cp[2];
-            double dd = dx * dx + dy * dy + dz * dz;
-            if (dd >= it->r2)
-                continue;
-            *t = tt, *region = reg, *d2 = dd;
-            return 1;
+            if (near_tri(it, s->perm[it->leaf->first + it->k++], t, region, bary, cp, d2))
+                return 1;
+            continue;
         }
         it->leaf = NULL;
         if (it->sp == 0)
@@ -663,7 +666,10 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, const 
         dem_body tb;
         dem_body_triangle(v[0], v[1], v[2], zero, &tb);
         double dep, nn[3], pc[3];
-        if (dem_body_penetration(&tb, &gb, 0, &dep, nn, pc) != 1)
+        int pr = dem_body_penetration(&tb, &gb, 0, &dep, nn, pc);
+        if (pr < 0 && sc->ccd_failed_grain < 0) /* libccd failed: reported after the pass */
+            sc->ccd_failed_grain = i, sc->ccd_failed_tri = tri_id;
+        if (pr != 1)
             continue;
         if (!scratch_room(sc, n, i))
             break;
@@ -760,21 +766,6 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, const 
     return m;
 }
 
-/* Grows an int array to hold `need` entries (doubling); 0 or CM_ERR_NOMEM. */
-static int grow_ints(int **a, int *cap, int need)
-{
-    if (need <= *cap)
-        return CM_OK;
-    int c = *cap ? *cap : 1024;
-    while (c < need)
-        c *= 2;
-    int *b = realloc(*a, (size_t)c * sizeof *b);
-    if (!b)
-        return CM_ERR_NOMEM;
-    *a = b, *cap = c;
-    return CM_OK;
-}
-
 /* The triangle lists of grains [lo, hi): every triangle whose closest point
  * lies within r + margin of the grain's centre, in the tree's order. A grain
  * without one cannot touch the surface before the lists are rebuilt: its
@@ -796,7 +787,7 @@ static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi,
             near_iter it;
             near_begin(&it, s, c, r, &overflow);
             while (near_next(&it, &t, &reg, bary, cp, &d2)) {
-                if (grow_ints(&sc->ltri, &sc->lt_cap, sc->n_lt + 1)) {
+                if (dem_grow_ints(&sc->ltri, &sc->lt_cap, sc->n_lt + 1)) {
                     sc->nomem = 1;
                     return overflow_slot;
                 }
@@ -806,7 +797,8 @@ static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi,
                 overflow_slot = i;
         }
         if (sc->n_lt > start) {
-            if (grow_ints(&sc->lgrain, &sc->lg_cap, sc->n_lg + 1) || grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 2)) {
+            if (dem_grow_ints(&sc->lgrain, &sc->lg_cap, sc->n_lg + 1) ||
+                dem_grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 2)) {
                 sc->nomem = 1;
                 return overflow_slot;
             }
@@ -818,7 +810,7 @@ static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi,
             g->surf_count[i] = 0;
         }
     }
-    if (grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 1))
+    if (dem_grow_ints(&sc->lstart, &sc->ls_cap, sc->n_lg + 1))
         sc->nomem = 1;
     else
         sc->lstart[sc->n_lg] = sc->n_lt;
@@ -857,7 +849,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     const int nn3 = 3 * s->n_nodes;
     memset(s->node_f, 0, (size_t)nn3 * sizeof *s->node_f);
     for (int t = 0; t < nt; t++)
-        s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0, s->scratch[t].n_rec = s->scratch[t].n_na = 0;
+        s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0, s->scratch[t].n_rec = s->scratch[t].n_na = 0,
+        s->scratch[t].ccd_failed_grain = -1;
     const dem_bvh_node *root = &s->bvh[0];
     const vec3 ref = v3_load(s->ref), dir = v3_load(s->travel);
     int overflow_slot = -1;
@@ -969,9 +962,10 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 double bd = DEM_SURF_PATCH_COS;
                 for (int k = 0; k < DEM_SURF_SLOTS; k++) {
                     const double *h = hs + k * DEM_SURF_SLOT_SIZE;
-                    if (taken[k] || h[6] == 0.0)
+                    if (taken[k] || h[DEM_SURF_SLOT_USED] == 0.0)
                         continue;
-                    double dd = nrm[a].x * h[3] + nrm[a].y * h[4] + nrm[a].z * h[5];
+                    const double *hn = h + DEM_SURF_SLOT_N;
+                    double dd = nrm[a].x * hn[0] + nrm[a].y * hn[1] + nrm[a].z * hn[2];
                     if (dd > bd)
                         bd = dd, best = k;
                 }
@@ -1034,8 +1028,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 double delta = shaped ? sh_depth[a] : r - sqrt(cd[a].d2), Rc = shaped ? sh_r[a] : r;
                 vec3 F = dem_hm_force(cf, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
                 if (slot_of[a] >= 0) {
-                    v3_store(xi + 3, nrm[a]);
-                    xi[6] = 1.0;
+                    v3_store(xi + DEM_SURF_SLOT_N, nrm[a]);
+                    xi[DEM_SURF_SLOT_USED] = 1.0;
                 }
                 fsum = v3_add(fsum, F);
                 tsum = v3_add(tsum, v3_cross(lever, F));
@@ -1083,6 +1077,9 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         surf_replay(&s->scratch[t], s->node_f, &s->tot);
     for (int t = 0; t < nt; t++) {
         const surf_scratch *sc = &s->scratch[t];
+        if (sc->ccd_failed_grain >= 0)
+            return cm_fail(err, CM_ERR_NUMERIC, "step %ld: grain %d against surface triangle %d: libccd's MPR failed",
+                           w->step, g->id[sc->ccd_failed_grain], sc->ccd_failed_tri);
         if (sc->nomem)
             return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory growing the surface candidate buffer beyond %d",
                            w->step, sc->cap);

@@ -22,7 +22,8 @@ typedef struct dem_bvh_node {
  * step to step by their normal, so that a spring survives the contact point
  * crossing a triangle edge. */
 #define DEM_SURF_SLOTS 4
-#define DEM_SURF_SLOT_SIZE 7 /* xi[3], n[3], used */
+#define DEM_SURF_SLOT_SIZE 7 /* xi[3], n[3], used: */
+enum { DEM_SURF_SLOT_XI = 0, DEM_SURF_SLOT_N = 3, DEM_SURF_SLOT_USED = 6 }; /* offsets in a slot */
 /* Candidate triangles per grain: the per-thread buffers start at this size
  * and double (logged) when a grain meets more triangles, e.g. a large grain
  * on a fine FE mesh. */

@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "dem_bed.h"
+#include "dem_config.h"
 #include "dem_world.h"
 #include "log.h"
 

@@ -21,6 +21,7 @@
 #define DEM_WINDOW_H
 
 #include "dem.h"
+#include "dem_config.h"
 
 /* Automatic freezing distance in contact lengths. Measured (rigid wheel
  * under 150 N, 20 % slip, tests/dem/test_dem_window.c freeze_distance_sweep,

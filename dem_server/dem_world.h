@@ -4,6 +4,7 @@
 #define DEM_WORLD_H
 
 #include <stdint.h>
+#include <stdlib.h>
 
 #include "dem.h"
 #include "dem_contact.h"
@@ -84,7 +85,7 @@ typedef struct dem_thread_buf {
     double *f; /* 6 * cap: fx fy fz tx ty tz blocks */
     double wall_f[DEM_MAX_WALLS][3];
     int contacts;
-    double pad[8];
+    double pad[8];     /* keeps two threads' wall_f apart by a cache line (no false sharing) */
 } dem_thread_buf;
 
 struct dem_world {
@@ -146,7 +147,29 @@ struct dem_world {
 
 _Static_assert(DEM_SCRATCH_PER_GRAIN >= 4, "scratch holds the saved quaternions of shaped grains");
 
+/* Grows an int array to hold `need` entries (doubling from 1024); CM_OK or
+ * CM_ERR_NOMEM (the array is kept). */
+static inline int dem_grow_ints(int **a, int *cap, int need)
+{
+    if (need <= *cap)
+        return CM_OK;
+    int c = *cap ? *cap : 1024;
+    while (c < need)
+        c *= 2;
+    int *b = realloc(*a, (size_t)c * sizeof *b);
+    if (!b)
+        return CM_ERR_NOMEM;
+    *a = b, *cap = c;
+    return CM_OK;
+}
+
+/* dem_grid.c: radii, skin and the time-step check before the first step
+ * (also after grains or walls changed), and the neighbour list. */
 int dem_world_prepare(dem_world *w, cm_error *err);
+int dem_neighbour_rebuild(dem_world *w, cm_error *err);
+/* dem_timestep.c: dem.dt against the time-step limits (error naming the
+ * limit and the setting to change). */
+int dem_check_dt(dem_world *w, cm_error *err);
 
 /* dem_pairs.c: the plan for the current pair list, and stage "pairs" for
  * sphere pairs (forces and torques added into the grains; returns the
@@ -155,6 +178,8 @@ int dem_world_prepare(dem_world *w, cm_error *err);
 int dem_pair_plan_build(dem_world *w, cm_error *err);
 int dem_stage_pairs(dem_world *w);
 int dem_pair_force(dem_world *w, int p, double out[DEM_PAIR_F]);
+/* dem_world.c: moves grain data so that slot k holds the grain previously in
+ * order[k] (the re-sort at a rebuild). */
 void dem_grains_permute(dem_world *w, const int *order);
 
 #endif

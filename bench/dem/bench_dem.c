@@ -24,6 +24,7 @@
 #include <string.h>
 
 #include "dem.h"
+#include "dem_bed.h"
 #include "log.h"
 #include "timer.h"
 

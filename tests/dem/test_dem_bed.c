@@ -6,6 +6,9 @@
 
 #include <hdf5.h>
 
+#include "dem_bed.h"
+#include "dem_config.h"
+#include "dem_output.h"
 #include "scene.h"
 #include "test_dem_common.h"
 

@@ -7,11 +7,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "dem_bed.h"
+#include "dem_config.h"
+#include "dem_output.h"
 #include "dem_shape.h"
 #include "dem_surface.h"
 #include "dem_world.h"
-#include "test_dem_common.h"
 #include "scene.h"
+#include "test_dem_common.h"
 #include "timer.h"
 
 static dem_shape_def box_def(double a, double b, double c)

@@ -3,6 +3,7 @@
  * barycentric force transfer (eq. 42). */
 #include <stdlib.h>
 
+#include "dem_bed.h"
 #include "dem_surface.h"
 #include "test_dem_common.h"
 

@@ -4,6 +4,7 @@
  * test: the final state hashed across thread counts). */
 #include <stdlib.h>
 
+#include "dem_bed.h"
 #include "test_dem_common.h"
 #include "timer.h"
 

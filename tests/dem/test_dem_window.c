@@ -3,6 +3,8 @@
  * cylinder rolling over a long bed against the same travel through a window. */
 #include <stdlib.h>
 
+#include "dem_bed.h"
+#include "dem_config.h"
 #include "dem_window.h"
 #include "dem_world.h"
 #include "log.h"

@@ -1,0 +1,385 @@
+/* The time step, a pipeline of named stages, each timed into w->prof
+ * (dem_profile):
+ *   surface    clear forces -> gravity -> walls -> triangle surface     (dem_step_surface)
+ *   pairs      grain–grain narrow phase over the neighbour list, each     (dem_step_grains)
+ *              pair's force added into its grains in pair-list order, the
+ *              same sums for any thread count (dem_pairs.c)
+ *   integrate  Verlet (eqs. 4–5), ω and quaternion, largest displacement
+ *   rebuild    neighbour grid, re-sort and pair list when a grain moved
+ *              more than skin/2 (or the grains changed; dem_grid.c)
+ * In the coupled loop (dem_coupled.c) the exchange sits between surface and
+ * pairs, so that pairs and integrate overlap the FEM's step. */
+#include "dem_world.h"
+
+#include <float.h>
+#include <limits.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "timer.h"
+#include "vec3.h"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* ---- the step ---------------------------------------------------------- */
+
+static inline int thread_id(void)
+{
+#ifdef _OPENMP
+    return omp_get_thread_num();
+#else
+    return 0;
+#endif
+}
+
+/* Gravity and walls for grain slots [lo, hi); wall forces into wf. Inlined
+ * twice with `shaped` constant: the sphere-only instance is the original
+ * loop, without a shape test. */
+static inline __attribute__((always_inline)) int walls_range(dem_world *w, int lo, int hi, double (*wf)[3],
+                                                             const int shaped)
+{
+    dem_grains *g = &w->g;
+    const int nw = w->n_walls;
+    const double dt = w->def.dt;
+    const vec3 grav = v3_load(w->def.gravity);
+    const int near_valid = w->walls_near_valid;
+    const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
+    int contacts = 0;
+    for (int i = lo; i < hi; i++) {
+        double m = 1.0 / g->inv_m[i];
+        /* gravity, eq. 1 */
+        g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
+        g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
+        if (g->frozen[i]) /* stays put: its wall springs wait unchanged */
+            continue;
+        double r = g->r[i];
+        uint32_t mask = g->wall_mask[i];
+        /* the walls within reach (and any still holding a spring), in
+         * ascending order as the loop over all walls would take them */
+        uint32_t todo = near_valid ? g->wall_near[i] | mask : all;
+        while (todo) {
+            int k = __builtin_ctz(todo);
+            todo &= todo - 1;
+            const dem_wall *wl = &w->walls[k];
+            vec3 nrm = v3_load(wl->n);
+            double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
+            double delta = r - dist;
+            double *xi = g->wall_hist + ((size_t)i * nw + k) * 3;
+            if (delta <= 0.0) {
+                if (mask & (1u << k)) {
+                    xi[0] = xi[1] = xi[2] = 0.0;
+                    mask &= ~(1u << k);
+                }
+                continue;
+            }
+            if (shaped && g->shape[i] >= 0) { /* bounding sphere touches: the shape itself */
+                double F[3], T[3];
+                if (dem_shaped_wall(w, i, k, xi, F, T)) {
+                    mask |= 1u << k;
+                    contacts++;
+                    g->fx[i] += F[0], g->fy[i] += F[1], g->fz[i] += F[2];
+                    g->tx[i] += T[0], g->ty[i] += T[1], g->tz[i] += T[2];
+                    wf[k][0] -= F[0], wf[k][1] -= F[1], wf[k][2] -= F[2];
+                }
+                continue;
+            }
+            mask |= 1u << k;
+            contacts++;
+            vec3 lever = v3_scale(nrm, -dist); /* centre -> contact point on the plane */
+            vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]);
+            vec3 vrel = v3_add(v3(g->vx[i], g->vy[i], g->vz[i]), v3_cross(wi, lever));
+            const dem_pair_coef *cf = &w->coef[g->mat[i]][wl->material];
+            double fn;
+            /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
+            vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
+            vec3 T = v3_add(v3_cross(lever, F), dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+            g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
+            g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
+            wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
+        }
+        g->wall_mask[i] = mask;
+    }
+    return contacts;
+}
+
+int dem_step_surface(dem_world *w, cm_error *err)
+{
+    if (!w->prepared) {
+        int rc = dem_world_prepare(w, err);
+        if (rc)
+            return rc;
+    }
+    double t0 = cm_now();
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, nw = w->n_walls;
+    const int shaped = w->n_shaped > 0;
+    int contacts = 0;
+    for (int t = 0; t < nt; t++)
+        memset(w->tb[t].wall_f, 0, sizeof w->tb[t].wall_f);
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+        int tid = thread_id();
+        int lo = (int)((long)n * tid / nt), hi = (int)((long)n * (tid + 1) / nt);
+        double(*wf)[3] = w->tb[tid].wall_f;
+        contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
+    }
+    for (int k = 0; k < nw; k++) {
+        memset(w->walls[k].force, 0, sizeof w->walls[k].force);
+        for (int t = 0; t < nt; t++)
+            for (int c = 0; c < 3; c++)
+                w->walls[k].force[c] += w->tb[t].wall_f[k][c];
+    }
+    w->contacts_gw = contacts;
+    int rc = CM_OK;
+    if (w->surf)
+        rc = dem_surface_contacts(w, err);
+    w->prof.surface += cm_now() - t0;
+    return rc;
+}
+
+/* The arrays the pair kernel reads, copied out of the world once per stage
+ * so that the compiler keeps them in registers (through w->g it reloads every
+ * pointer after each store into the force and spring arrays). */
+/* Stage "pairs" for a world with shaped grains: the shaped
+ * contacts (dem_shape.c) add into force arrays, so each thread adds its
+ * contiguous block of pairs into its own buffer (thread 0 into the grain
+ * arrays), merged in thread order: deterministic for a given thread count. */
+static int stage_pairs_shaped(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
+    int contacts = 0;
+    dem_shaped_pose_update(w);
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+        int tid = thread_id();
+        int lo = (int)((long)np * tid / nt), hi = (int)((long)np * (tid + 1) / nt);
+        double *fx, *fy, *fz, *tx, *ty, *tz;
+        if (tid == 0) {
+            fx = g->fx, fy = g->fy, fz = g->fz, tx = g->tx, ty = g->ty, tz = g->tz;
+        } else {
+            double *b = w->tb[tid].f;
+            memset(b, 0, 6 * (size_t)cap * sizeof *b);
+            fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
+        }
+        for (int p = lo; p < hi; p++) {
+            int i = w->pi[p], j = w->pj[p];
+            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+            if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
+                double f[DEM_PAIR_F];
+                if (dem_pair_force(w, p, f)) {
+                    contacts++;
+                    fx[i] += f[0], fy[i] += f[1], fz[i] += f[2];
+                    fx[j] -= f[0], fy[j] -= f[1], fz[j] -= f[2];
+                    tx[i] += f[3], ty[i] += f[4], tz[i] += f[5];
+                    tx[j] += f[6], ty[j] += f[7], tz[j] += f[8];
+                }
+            } else
+                contacts += dem_shaped_pair(w, i, j, xi, fx, fy, fz, tx, ty, tz);
+        }
+#ifdef _OPENMP
+#pragma omp barrier
+#pragma omp for schedule(static)
+#endif
+        for (int i = 0; i < n; i++)
+            for (int t = 1; t < nt; t++) {
+                const double *b = w->tb[t].f;
+                g->fx[i] += b[i], g->fy[i] += b[cap + i], g->fz[i] += b[2 * cap + i];
+                g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
+            }
+    }
+    return contacts;
+}
+
+/* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
+ * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
+ * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
+ * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
+ * orientation as a unit quaternion rotated by ω dt (no Euler-angle
+ * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
+ * since the last rebuild; returns the first slot with a non-finite position,
+ * or INT_MAX. */
+static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, int lo, int hi, double dt,
+                                                                 double *maxd2_out)
+{
+    double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
+    double *restrict vx = g->vx, *restrict vy = g->vy, *restrict vz = g->vz;
+    double *restrict wx = g->wx, *restrict wy = g->wy, *restrict wz = g->wz;
+    const double *restrict fx = g->fx, *restrict fy = g->fy, *restrict fz = g->fz;
+    const double *restrict tx = g->tx, *restrict ty = g->ty, *restrict tz = g->tz;
+    const double *restrict inv_m = g->inv_m, *restrict inv_i = g->inv_i;
+    const double *restrict x0 = g->x0, *restrict y0 = g->y0, *restrict z0 = g->z0;
+    double *restrict qa = g->q;
+    const unsigned char *restrict frozen = g->frozen;
+    double maxd2 = 0.0;
+    int nonfinite = 0;
+    /* Branch-free so that it vectorises: a frozen grain's values are computed
+     * and thrown away (selects), the same bits as skipping it. */
+#pragma omp simd reduction(max : maxd2) reduction(| : nonfinite)
+    for (int i = lo; i < hi; i++) {
+        const int move = !frozen[i];
+        double im = inv_m[i], ii = inv_i[i];
+        double nvx = vx[i] + fx[i] * im * dt, nvy = vy[i] + fy[i] * im * dt, nvz = vz[i] + fz[i] * im * dt;
+        double nwx = wx[i] + tx[i] * ii * dt, nwy = wy[i] + ty[i] * ii * dt, nwz = wz[i] + tz[i] * ii * dt;
+        double nx = x[i] + nvx * dt, ny = y[i] + nvy * dt, nz = z[i] + nvz * dt;
+        /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
+         * the orientation does not feed back into the forces of spheres */
+        double *q = qa + 4 * (size_t)i;
+        double hx = 0.5 * dt * nwx, hy = 0.5 * dt * nwy, hz = 0.5 * dt * nwz;
+        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
+        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
+        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
+        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
+        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+        qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
+        q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
+        vx[i] = move ? nvx : vx[i], vy[i] = move ? nvy : vy[i], vz[i] = move ? nvz : vz[i];
+        wx[i] = move ? nwx : wx[i], wy[i] = move ? nwy : wy[i], wz[i] = move ? nwz : wz[i];
+        nx = move ? nx : x[i], ny = move ? ny : y[i], nz = move ? nz : z[i];
+        x[i] = nx, y[i] = ny, z[i] = nz;
+        double ex = nx - x0[i], ey = ny - y0[i], ez = nz - z0[i];
+        double d2 = ex * ex + ey * ey + ez * ez;
+        d2 = move ? d2 : 0.0;
+        maxd2 = d2 > maxd2 ? d2 : maxd2;
+        nonfinite |= !(d2 <= DBL_MAX); /* NaN or inf */
+    }
+    *maxd2_out = maxd2;
+    if (!nonfinite)
+        return INT_MAX;
+    for (int i = lo; i < hi; i++) { /* the first grain gone non-finite, for the message */
+        double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
+        if (!frozen[i] && !isfinite(ex * ex + ey * ey + ez * ez))
+            return i;
+    }
+    return INT_MAX;
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo, int hi, double dt, double *maxd2)
+{
+    return integrate_body(g, lo, hi, dt, maxd2);
+}
+#endif
+
+/* The AVX2 build of the loop where the CPU has it (and the world does not
+ * ask for the portable one): the same bits, as for the pair kernel. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, bool portable)
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (!portable && __builtin_cpu_supports("avx2"))
+        return integrate_avx2(g, lo, hi, dt, maxd2);
+#endif
+    return integrate_body(g, lo, hi, dt, maxd2);
+}
+
+/* Stage "integrate": integrate_range over the threads, then the rotation
+ * of shaped grains. *maxd2: the largest squared displacement since the last
+ * rebuild; returns the first slot with a non-finite position, or n. */
+static int stage_integrate(dem_world *w, double *maxd2_out)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads;
+    const double dt = w->def.dt;
+    const int shaped = w->n_shaped > 0;
+    double maxd2 = 0.0;
+    int bad = INT_MAX;
+    double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
+    if (shaped)
+        for (int i = 0; i < n; i++)
+            if (g->shape[i] >= 0)
+                memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
+    if (nt == 1) {
+        bad = integrate_range(g, 0, n, dt, &maxd2, w->def.portable_kernel);
+    } else {
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
+#endif
+        {
+            int tid = thread_id();
+            double m2;
+            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2,
+                                    w->def.portable_kernel);
+            maxd2 = m2 > maxd2 ? m2 : maxd2;
+            bad = b < bad ? b : bad;
+        }
+    }
+    if (bad > n)
+        bad = n;
+    if (shaped) {
+        /* Shaped grains: the loop above moved them (translation is the same)
+         * but treated their rotation as a sphere's; redo it. Euler's
+         * equations (eq. 8) in the body frame, leapfrog in the world angular
+         * momentum, L(t+dt/2) = L(t-dt/2) + T(t) dt, then the free rotation
+         * with that L over dt from the saved orientation (NO_SQUISH,
+         * dem_shape.h); omega from L at the new orientation. */
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+#endif
+        for (int i = 0; i < n; i++) {
+            if (g->shape[i] < 0 || g->frozen[i])
+                continue;
+            double *L = g->angmom + 3 * i, *q = g->q + 4 * i, om[3];
+            memcpy(q, qsave + 4 * i, 4 * sizeof *q);
+            L[0] += g->tx[i] * dt, L[1] += g->ty[i] * dt, L[2] += g->tz[i] * dt;
+            dem_rotate_free(q, L, g->inertia + 3 * i, dt, om);
+            g->wx[i] = om[0], g->wy[i] = om[1], g->wz[i] = om[2];
+        }
+    }
+    *maxd2_out = maxd2;
+    return bad;
+}
+
+/* The rest of the step after the surface stage: rebuild (if the grains
+ * changed) -> pairs -> integrate -> rebuild if a grain moved more
+ * than skin/2. */
+int dem_step_grains(dem_world *w, cm_error *err)
+{
+    if (!w->prepared)
+        return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
+    double t0 = cm_now();
+    if (w->need_rebuild || !w->plan.valid) {
+        int rc = w->need_rebuild ? dem_neighbour_rebuild(w, err) : dem_pair_plan_build(w, err);
+        if (rc)
+            return rc;
+        double t = cm_now();
+        w->prof.rebuild += t - t0;
+        t0 = t;
+    }
+    w->contacts_gg = w->n_shaped > 0 ? stage_pairs_shaped(w) : dem_stage_pairs(w);
+    double t_pairs = cm_now();
+    w->prof.pairs += t_pairs - t0;
+    t0 = t_pairs;
+    double maxd2;
+    int bad = stage_integrate(w, &maxd2);
+    w->step++;
+    w->time += w->def.dt;
+    w->prof.steps++;
+    double t1 = cm_now();
+    w->prof.integrate += t1 - t0;
+    if (bad < w->g.n)
+        return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
+                       w->step, w->time, w->g.id[bad]);
+    const double half = 0.5 * w->skin;
+    if (maxd2 > half * half) {
+        int rc = dem_neighbour_rebuild(w, err);
+        w->prof.rebuild += cm_now() - t1;
+        if (rc)
+            return rc;
+    }
+    return CM_OK;
+}
+
+int dem_step(dem_world *w, cm_error *err)
+{
+    int rc = dem_step_surface(w, err);
+    return rc ? rc : dem_step_grains(w, err);
+}

@@ -221,8 +221,6 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
     return CM_OK;
 }
 
-/* ---- the stage --------------------------------------------------------- */
-
 /* ---- the batched kernel ------------------------------------------------
  *
  * The same arithmetic as pair_force, in the same order, for a batch of
@@ -393,6 +391,8 @@ static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_
         add_j(s, j, f);
     }
 }
+
+/* ---- the stage --------------------------------------------------------- */
 
 /* A pair in contact joins the batch; a full batch is computed and added. */
 static inline __attribute__((always_inline)) void batch_push(const pair_arrays *a, const force_sums *s,

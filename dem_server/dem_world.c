@@ -114,7 +114,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     const size_t n_dbl = sizeof dbl / sizeof dbl[0];
     const size_t stride = ((size_t)cap * sizeof(double) + 4095) / 4096 * 4096 + 192;
     _Static_assert(sizeof dbl / sizeof dbl[0] * 192 <= 4096, "the stagger of the grain arrays fits in a page");
-    g->block = aligned_alloc(4096, n_dbl * stride);
+    g->block = aligned_alloc(4096, (n_dbl * stride + 4095) / 4096 * 4096); /* C17: a multiple of the alignment */
     if (!g->block)
         bad = 1;
     else

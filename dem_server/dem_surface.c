@@ -999,6 +999,12 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 for (int j = m; j < m + ns; j++)
                     if (cd[j].patch == a)
                         wsum += cd[j].w;
+                /* each node's share bk, kept in the contact's node
+                 * records (f[0] holds bk until the force is known) */
+                if (record_room(sc, 3 * (1 + ns)))
+                    continue;
+                node_add *share = sc->na + sc->n_na;
+                int n_share = 0;
                 vec3 vs = v3(0, 0, 0);
                 double inv_ms = 0.0;
                 for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
@@ -1011,6 +1017,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                         vs = v3_axpy(bk, v3_load(s->v + 3 * tn[k]), vs);
                         if (s->inv_mass)
                             inv_ms += bk * bk * s->inv_mass[tn[k]];
+                        share[n_share].node = tn[k];
+                        share[n_share++].f[0] = bk;
                     }
                 }
                 vec3 p = peff[a];
@@ -1039,23 +1047,13 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                  * point is the same weighted mean, so force and moment
                  * balance. Recorded, summed in grain order after the pass. */
                 vec3 Fs = v3_scale(F, -1.0);
-                if (record_room(sc, 3 * (1 + ns)))
-                    continue;
-                surf_rec *rc = &sc->rec[sc->n_rec++];
-                rc->n_nodes = 0;
-                for (int j = a; j < m + ns; j = j == a ? m : j + 1) {
-                    if (j != a && cd[j].patch != a)
-                        continue;
-                    const int *tn = s->tri + 3 * cd[j].tri;
-                    double wj = (j == a ? 1.0 : cd[j].w) / wsum;
-                    for (int k = 0; k < 3; k++) {
-                        double bk = wj * cd[j].bary[k];
-                        node_add *na = &sc->na[sc->n_na++];
-                        na->node = tn[k];
-                        na->f[0] = bk * Fs.x, na->f[1] = bk * Fs.y, na->f[2] = bk * Fs.z;
-                        rc->n_nodes++;
-                    }
+                for (int q = 0; q < n_share; q++) {
+                    double bk = share[q].f[0];
+                    share[q].f[0] = bk * Fs.x, share[q].f[1] = bk * Fs.y, share[q].f[2] = bk * Fs.z;
                 }
+                sc->n_na += n_share;
+                surf_rec *rc = &sc->rec[sc->n_rec++];
+                rc->n_nodes = n_share;
                 v3_store(rc->fs, Fs);
                 v3_store(rc->mom, v3_cross(v3_sub(p, ref), Fs));
                 rc->along = v3_dot(Fs, dir);

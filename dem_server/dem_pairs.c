@@ -90,12 +90,6 @@ static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g
     return 1;
 }
 
-int dem_pair_force(dem_world *w, int p, double out[DEM_PAIR_F])
-{
-    const pair_arrays a = pair_arrays_of(w);
-    return pair_force(&a, p, out);
-}
-
 /* The grain arrays the sums go into. */
 typedef struct force_sums {
     double *restrict fx, *restrict fy, *restrict fz, *restrict tx, *restrict ty, *restrict tz;
@@ -475,8 +469,64 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const coef_tab
     return contacts;
 }
 
+/* Stage "pairs" for a world with shaped grains: the shaped
+ * contacts (dem_shape.c) add into force arrays, so each thread adds its
+ * contiguous block of pairs into its own buffer (thread 0 into the grain
+ * arrays), merged in thread order: deterministic for a given thread count. */
+static int stage_pairs_shaped(dem_world *w)
+{
+    dem_grains *g = &w->g;
+    const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
+    int contacts = 0;
+    const pair_arrays pa = pair_arrays_of(w);
+    dem_shaped_pose_update(w);
+#ifdef _OPENMP
+#pragma omp parallel num_threads(nt) reduction(+ : contacts)
+#endif
+    {
+#ifdef _OPENMP
+        int tid = omp_get_thread_num();
+#else
+        int tid = 0;
+#endif
+        int lo = (int)((long)np * tid / nt), hi = (int)((long)np * (tid + 1) / nt);
+        force_sums s = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
+        if (tid > 0) {
+            double *b = w->tb[tid].f;
+            memset(b, 0, 6 * (size_t)cap * sizeof *b);
+            s = (force_sums){b, b + cap, b + 2 * cap, b + 3 * cap, b + 4 * cap, b + 5 * cap};
+        }
+        for (int p = lo; p < hi; p++) {
+            int i = w->pi[p], j = w->pj[p];
+            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+            if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
+                double f[DEM_PAIR_F];
+                if (pair_force(&pa, p, f)) {
+                    contacts++;
+                    add_i(&s, i, f);
+                    add_j(&s, j, f);
+                }
+            } else
+                contacts += dem_shaped_pair(w, i, j, xi, s.fx, s.fy, s.fz, s.tx, s.ty, s.tz);
+        }
+#ifdef _OPENMP
+#pragma omp barrier
+#pragma omp for schedule(static)
+#endif
+        for (int i = 0; i < n; i++)
+            for (int t = 1; t < nt; t++) {
+                const double *b = w->tb[t].f;
+                g->fx[i] += b[i], g->fy[i] += b[cap + i], g->fz[i] += b[2 * cap + i];
+                g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
+            }
+    }
+    return contacts;
+}
+
 int dem_stage_pairs(dem_world *w)
 {
+    if (w->n_shaped > 0)
+        return stage_pairs_shaped(w);
     const int nt = w->n_threads;
     const pair_arrays a = pair_arrays_of(w);
     dem_grains *g = &w->g;

@@ -144,62 +144,6 @@ int dem_step_surface(dem_world *w, cm_error *err)
     return rc;
 }
 
-/* The arrays the pair kernel reads, copied out of the world once per stage
- * so that the compiler keeps them in registers (through w->g it reloads every
- * pointer after each store into the force and spring arrays). */
-/* Stage "pairs" for a world with shaped grains: the shaped
- * contacts (dem_shape.c) add into force arrays, so each thread adds its
- * contiguous block of pairs into its own buffer (thread 0 into the grain
- * arrays), merged in thread order: deterministic for a given thread count. */
-static int stage_pairs_shaped(dem_world *w)
-{
-    dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads, cap = g->cap, np = w->n_active_pairs;
-    int contacts = 0;
-    dem_shaped_pose_update(w);
-#ifdef _OPENMP
-#pragma omp parallel num_threads(nt) reduction(+ : contacts)
-#endif
-    {
-        int tid = thread_id();
-        int lo = (int)((long)np * tid / nt), hi = (int)((long)np * (tid + 1) / nt);
-        double *fx, *fy, *fz, *tx, *ty, *tz;
-        if (tid == 0) {
-            fx = g->fx, fy = g->fy, fz = g->fz, tx = g->tx, ty = g->ty, tz = g->tz;
-        } else {
-            double *b = w->tb[tid].f;
-            memset(b, 0, 6 * (size_t)cap * sizeof *b);
-            fx = b, fy = b + cap, fz = b + 2 * cap, tx = b + 3 * cap, ty = b + 4 * cap, tz = b + 5 * cap;
-        }
-        for (int p = lo; p < hi; p++) {
-            int i = w->pi[p], j = w->pj[p];
-            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
-            if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
-                double f[DEM_PAIR_F];
-                if (dem_pair_force(w, p, f)) {
-                    contacts++;
-                    fx[i] += f[0], fy[i] += f[1], fz[i] += f[2];
-                    fx[j] -= f[0], fy[j] -= f[1], fz[j] -= f[2];
-                    tx[i] += f[3], ty[i] += f[4], tz[i] += f[5];
-                    tx[j] += f[6], ty[j] += f[7], tz[j] += f[8];
-                }
-            } else
-                contacts += dem_shaped_pair(w, i, j, xi, fx, fy, fz, tx, ty, tz);
-        }
-#ifdef _OPENMP
-#pragma omp barrier
-#pragma omp for schedule(static)
-#endif
-        for (int i = 0; i < n; i++)
-            for (int t = 1; t < nt; t++) {
-                const double *b = w->tb[t].f;
-                g->fx[i] += b[i], g->fy[i] += b[cap + i], g->fz[i] += b[2 * cap + i];
-                g->tx[i] += b[3 * cap + i], g->ty[i] += b[4 * cap + i], g->tz[i] += b[5 * cap + i];
-            }
-    }
-    return contacts;
-}
-
 /* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
  * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
  * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
@@ -354,7 +298,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
         w->prof.rebuild += t - t0;
         t0 = t;
     }
-    w->contacts_gg = w->n_shaped > 0 ? stage_pairs_shaped(w) : dem_stage_pairs(w);
+    w->contacts_gg = dem_stage_pairs(w);
     double t_pairs = cm_now();
     w->prof.pairs += t_pairs - t0;
     t0 = t_pairs;

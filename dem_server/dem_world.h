@@ -171,13 +171,10 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err);
  * limit and the setting to change). */
 int dem_check_dt(dem_world *w, cm_error *err);
 
-/* dem_pairs.c: the plan for the current pair list, and stage "pairs" for
- * sphere pairs (forces and torques added into the grains; returns the
- * contacts). dem_pair_force: one pair's force on i and torques on i and j
- * (out[DEM_PAIR_F]); 1 in contact (shaped worlds' sphere pairs). */
+/* dem_pairs.c: the plan for the current pair list, and stage "pairs"
+ * (forces and torques added into the grains; returns the contacts). */
 int dem_pair_plan_build(dem_world *w, cm_error *err);
 int dem_stage_pairs(dem_world *w);
-int dem_pair_force(dem_world *w, int p, double out[DEM_PAIR_F]);
 /* dem_world.c: moves grain data so that slot k holds the grain previously in
  * order[k] (the re-sort at a rebuild). */
 void dem_grains_permute(dem_world *w, const int *order);

@@ -230,6 +230,8 @@ typedef struct dem_surface_total {
     double traction_neg; /* N, T_R: sum of negative per-contact components (<= 0) */
     int contacts;        /* grain–surface contacts after de-duplication */
     double max_overlap;  /* largest grain–surface overlap / grain radius (the run-time guard's) */
+    int worst_grain;     /* slot of the grain with that overlap, its triangle (when contacts > 0) */
+    int worst_tri;
 } dem_surface_total;
 
 /* Per-node forces ON the surface from the last dem_step_surface (3n, N),
@@ -269,6 +271,11 @@ typedef struct dem_stats {
     int contacts_gg, contacts_gw, contacts_gs;
     double max_overlap;   /* largest delta / r_min of a grain–grain or grain–wall pair */
     double max_overlap_surface; /* largest grain–surface overlap / grain radius in the last step */
+    struct {                    /* the grain with that overlap (tag -1: none), for the guard's message */
+        int tag, tri;
+        double x[3], v[3], r;
+        int frozen;
+    } worst_surface;
     dem_profile profile;
 } dem_stats;
 

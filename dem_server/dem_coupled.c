@@ -76,9 +76,14 @@ static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
     if (def->max_surface_overlap > 0 && s.max_overlap_surface > def->max_surface_overlap)
         return cm_fail(err, CM_ERR_NUMERIC,
                        "a grain pressed into the tire by %.0f %% of its radius at t = %.4f s (step %ld; limit "
-                       "coupling.max_surface_overlap = %.0f %%): the tread's contact is too soft for the load or "
-                       "coupling.dt is too long; raise the tread material's young modulus or reduce coupling.dt",
-                       100 * s.max_overlap_surface, s.time, s.step, 100 * def->max_surface_overlap);
+                       "coupling.max_surface_overlap = %.0f %%): grain %d (r %.2f mm%s) at (%.4f, %.4f, %.4f) m moving "
+                       "(%.3f, %.3f, %.3f) m/s against surface triangle %d; the tread's contact is too soft for the "
+                       "load or coupling.dt is too long; raise the tread material's young modulus or reduce "
+                       "coupling.dt",
+                       100 * s.max_overlap_surface, s.time, s.step, 100 * def->max_surface_overlap,
+                       s.worst_surface.tag, 1e3 * s.worst_surface.r, s.worst_surface.frozen ? ", frozen" : "",
+                       s.worst_surface.x[0], s.worst_surface.x[1], s.worst_surface.x[2], s.worst_surface.v[0],
+                       s.worst_surface.v[1], s.worst_surface.v[2], s.worst_surface.tri);
     return CM_OK;
 }
 

@@ -200,6 +200,7 @@ typedef struct surf_rec {
     double fs[3], mom[3]; /* reaction on the surface, its moment about the reference point */
     double along, overlap; /* reaction along the travel direction; overlap / radius */
     int n_nodes;          /* node_add entries of the contact, following the previous contact's */
+    int grain, tri;       /* slot of the grain and the contact's triangle (the guard names them) */
 } surf_rec;
 
 /* A node's force from one contact (barycentric share, eq. 42). */
@@ -836,7 +837,8 @@ static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_tota
         else
             tot->traction_neg += rc->along;
         tot->contacts++;
-        tot->max_overlap = fmax(tot->max_overlap, rc->overlap);
+        if (rc->overlap > tot->max_overlap)
+            tot->max_overlap = rc->overlap, tot->worst_grain = rc->grain, tot->worst_tri = rc->tri;
     }
 }
 
@@ -1058,6 +1060,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 v3_store(rc->mom, v3_cross(v3_sub(p, ref), Fs));
                 rc->along = v3_dot(Fs, dir);
                 rc->overlap = delta / Rc;
+                rc->grain = i;
+                rc->tri = cd[a].tri;
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;

@@ -385,12 +385,12 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
         cm_log_warn("the bed reaches only %.3f m ahead of the wheel centre%s, less than 2 contact lengths (%.3f m): "
                     "its end stiffens the soil the wheel pushes; raise %s",
                     ahead, win ? "" : " at its start", 2.0 * lc, k_ahead);
-        warnings++;
+        warnings |= DEM_FOOTPRINT_AHEAD;
     }
     if (behind < lc) {
         cm_log_warn("the bed reaches only %.3f m behind the wheel centre, less than a contact length (%.3f m); raise %s",
                     behind, lc, k_behind);
-        warnings++;
+        warnings |= DEM_FOOTPRINT_BEHIND;
     }
     int ky0 = find_wall(w, 0, 1), ky1 = find_wall(w, 0, -1);
     double left = ky0 >= 0 ? lo[1] - w->walls[ky0].p[1] : INFINITY;
@@ -400,14 +400,33 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
                     "traction reads low in too narrow a soil bin; widen dem.bed.box_min[1] / box_max[1] or centre the "
                     "wheel (wheel.center[1])",
                     left, right, 0.5 * b);
-        warnings++;
+        warnings |= DEM_FOOTPRINT_SIDES;
+    }
+    /* The floor: by Boussinesq's solution for a uniformly loaded circle of
+     * radius a, the vertical stress at depth a under its centre is still
+     * 1 - 2^(-3/2) = 65 % of the contact pressure, so a rigid floor nearer
+     * than a (a circle of the footprint's area lc x b) carries the wheel
+     * rather than the soil, and it stiffens the bed. */
+    for (int k = 0; k < w->n_walls; k++) {
+        const dem_wall *fl = &w->walls[k];
+        if (!(fabs(fl->n[2] - 1.0) < 1e-9))
+            continue;
+        double depth = dem_bed_height(w) - fl->p[2] - z, a = sqrt(lc * b / M_PI);
+        if (depth < a) {
+            cm_log_warn("the soil under the tire is %.3f m deep at %.1f mm sinkage, less than the footprint's "
+                        "equivalent radius %.3f m: the floor bears %.0f %% of the contact pressure there (Boussinesq) "
+                        "and stiffens the bed; deepen the bed (dem.bed.layers)",
+                        depth, 1e3 * z, a, 100.0 * (1.0 - pow(1.0 + a * a / fmax(depth * depth, 1e-12), -1.5)));
+            warnings |= DEM_FOOTPRINT_FLOOR;
+        }
+        break;
     }
     if (win && win->def.freeze_distance > 0 && win->def.freeze_distance < 2.0 * lc) {
         cm_log_warn("dem.window.freeze_distance = %.3f m is shorter than 2 contact lengths (%.3f m): the frozen soil "
                     "ahead stiffens the bed (measured: 22-30 %% less sinkage at 1.1 contact lengths); raise "
                     "dem.window.freeze_distance",
                     win->def.freeze_distance, 2.0 * lc);
-        warnings++;
+        warnings |= DEM_FOOTPRINT_FREEZE;
     }
     return warnings;
 }

@@ -65,11 +65,22 @@ void dem_window_free(dem_window **win);
  *                     grains, stiffens the soil the wheel pushes),
  *   behind < l       (bed behind it),
  *   side clearance (bed wall to tire side) < b / 2 on either side,
+ *   soil under the tire's lowest point (bed height - floor - z) < a, the
+ *                     radius of a circle of the footprint's area l b (the
+ *                     floor bears > 65 % of the contact pressure: Boussinesq),
  *   0 < freeze_distance < 2 l.
  * win may be NULL (no window: the bed's ends at the wheel's start position
  * are checked, and `ahead` shrinks as the wheel travels). An automatic
  * freezing distance (def->freeze_distance < 0) is set here to
- * DEM_WINDOW_FREEZE_LENGTHS contact lengths. Returns the number of warnings. */
+ * DEM_WINDOW_FREEZE_LENGTHS contact lengths. Returns the warnings given, as
+ * DEM_FOOTPRINT_* bits (0: none). */
+enum {
+    DEM_FOOTPRINT_AHEAD = 1,
+    DEM_FOOTPRINT_BEHIND = 2,
+    DEM_FOOTPRINT_SIDES = 4,
+    DEM_FOOTPRINT_FLOOR = 8,
+    DEM_FOOTPRINT_FREEZE = 16
+};
 int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_window_def *def, double wheel_x,
                                double expected_sinkage);
 

@@ -751,6 +751,16 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     s->contacts_gs = w->surf ? w->surf->tot.contacts : 0;
     /* Grain–surface overlaps of the last surface step (the tire's). */
     s->max_overlap_surface = w->surf ? w->surf->tot.max_overlap : 0.0;
+    s->worst_surface.tag = -1;
+    if (w->surf && w->surf->tot.contacts > 0) {
+        int i = w->surf->tot.worst_grain;
+        s->worst_surface.tag = g->tag[i];
+        s->worst_surface.tri = w->surf->tot.worst_tri;
+        s->worst_surface.x[0] = g->x[i], s->worst_surface.x[1] = g->y[i], s->worst_surface.x[2] = g->z[i];
+        s->worst_surface.v[0] = g->vx[i], s->worst_surface.v[1] = g->vy[i], s->worst_surface.v[2] = g->vz[i];
+        s->worst_surface.r = g->r[i];
+        s->worst_surface.frozen = g->frozen[i];
+    }
     s->profile = w->prof;
 }
 

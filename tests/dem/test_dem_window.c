@@ -464,7 +464,9 @@ static int window_matches_long_bed(void)
     print_result("long bed 0.7 m", &lng);
     print_result("window (0.3 m sample)", &win);
     ENSURE(win.shifts_back >= 2 && win.shifts_front >= 2);
-    ENSURE(win.warnings == 0); /* the window passes its own footprint check */
+    /* the window passes its own footprint check; this 4 cm bed is shallow
+     * on purpose (cheap), so the floor is warned about, in both runs alike */
+    ENSURE_MSG(win.warnings == DEM_FOOTPRINT_FLOOR, "warnings %#x", win.warnings);
     ENSURE_MSG(win.max_grains < 0.75 * lng.max_grains, "window %d grains vs long %d", win.max_grains, lng.max_grains);
     ENSURE_NEAR(win.sinkage, lng.sinkage, WINDOW_TOL_SINK);
     ENSURE_NEAR(win.fx, lng.fx, WINDOW_TOL_FX);
@@ -561,6 +563,57 @@ static int freeze_distance_sweep(void)
     return 0;
 }
 
+/* The floor check of dem_window_check_footprint: the wheel of roll_wheel
+ * (R 0.1 m, b 0.06 m) at 15 mm expected sinkage has a footprint
+ * l = 2 sqrt(2 R z - z^2) = 0.105 m long, a circle of its area a = 44.8 mm
+ * in radius; a bed whose soil under the tire's lowest point is shallower
+ * than a is warned about, a deeper one is not. Lattice beds of 10 mm grains,
+ * 5 and 7 cm high (23 and 43 mm under the tire), nothing stepped. */
+static int footprint_floor(void)
+{
+    const double R = 0.1, b = 0.06, r = 0.005, z = 0.015;
+    const double lc = 2.0 * sqrt(2.0 * R * z - z * z), a = sqrt(lc * b / M_PI);
+    cm_log_set_quiet(1);
+    for (int deep = 0; deep < 2; deep++) {
+        const int layers = deep ? 7 : 5;
+        dem_material mat = test_material(5e7, 0.3, 0.5, 0.6);
+        dem_world *w = NULL;
+        cm_error err = {0};
+        dem_world_def d = dem_world_def_default();
+        d.dt = 1e-5;
+        d.max_grains = 30 * 12 * layers;
+        ENSURE_MSG(dem_world_create(&d, 1, &mat, &w, &err) == 0, "%s", err.msg);
+        double p0[3] = {0, 0, 0}, nz[3] = {0, 0, 1};
+        ENSURE(dem_wall_add(w, p0, nz, 0, &err) == 0);
+        for (int k = 0; k < layers; k++)
+            for (int iy = 0; iy < 12; iy++)
+                for (int ix = 0; ix < 30; ix++) {
+                    double x[3] = {r + 2 * r * ix, r + 2 * r * iy, r + 2 * r * k};
+                    ENSURE_MSG(dem_grain_add(w, x, r, 0, NULL, &err) == 0, "%s", err.msg);
+                }
+        double h = dem_bed_height(w);
+        ENSURE_NEAR(h, 2 * r * layers, 1e-12);
+        static double xr[3 * CYL_NODES], xw[3 * CYL_NODES];
+        static int tri[3 * CYL_TRIS];
+        cylinder_mesh(R, b, xr, tri);
+        double c[3] = {0.15, 0.06, h + R};
+        for (int q = 0; q < CYL_NODES; q++)
+            for (int k = 0; k < 3; k++)
+                xw[3 * q + k] = xr[3 * q + k] + c[k];
+        ENSURE_MSG(dem_surface_set(w, CYL_NODES, xw, CYL_TRIS, tri, 0, &err) == 0, "%s", err.msg);
+        dem_window_def wd = {.expected_sinkage = z};
+        int warn = dem_window_check_footprint(NULL, w, &wd, c[0], z);
+        double depth = h - z;
+        printf("bed %.0f mm: %.0f mm of soil under the tire against a = %.1f mm: warnings %#x\n", 1e3 * h, 1e3 * depth,
+               1e3 * a, warn);
+        ENSURE(deep ? depth > a : depth < a);
+        ENSURE(deep ? !(warn & DEM_FOOTPRINT_FLOOR) : (warn & DEM_FOOTPRINT_FLOOR));
+        ENSURE((warn & ~DEM_FOOTPRINT_FLOOR) == 0); /* no end or side walls: nothing else to warn about */
+        dem_world_destroy(&w);
+    }
+    return 0;
+}
+
 static const test_case tests[] = {
     {"remove_compacts", remove_compacts},
     {"add_copies", add_copies},
@@ -568,6 +621,7 @@ static const test_case tests[] = {
     {"frozen_grains", frozen_grains},
     {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},
+    {"footprint_floor", footprint_floor},
 };
 
 /* Measurements, not tests (they print the figures the tolerances above were

@@ -225,8 +225,8 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
  * -ffp-contract=off forbids fused multiply-adds (target "avx2" does not
  * enable FMA), so the bits are those of pair_force on any CPU:
  * test_dem_threads runs the scalar, portable and AVX2 paths against each
- * other. Rolling resistance, when a material has it, is added in the scalar
- * scatter that follows. */
+ * other. Rolling resistance (dem_rolling_torque) is in the loop too, built
+ * in only when some material pair has it. */
 enum { BATCH = 64 };
 
 typedef struct pair_batch {
@@ -238,7 +238,6 @@ typedef struct pair_batch {
     double fx[BATCH], fy[BATCH], fz[BATCH];
     double tix[BATCH], tiy[BATCH], tiz[BATCH], tjx[BATCH], tjy[BATCH], tjz[BATCH];
     double sx[BATCH], sy[BATCH], sz[BATCH];
-    double R[BATCH], fn[BATCH];
 } pair_batch;
 
 /* Coefficients of every material pair in structure-of-arrays, indexed by
@@ -247,6 +246,7 @@ typedef struct coef_table {
     double E[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], G[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
     double gn[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], gt[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
     double mu[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS], st_sn[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS];
+    double mr[DEM_MAX_MATERIALS * DEM_MAX_MATERIALS]; /* mu_roll */
     int rolling; /* some pair has mu_roll > 0 */
 } coef_table;
 
@@ -258,26 +258,25 @@ static void coef_table_fill(const dem_world *w, coef_table *t)
             const dem_pair_coef *c = &w->coef[a][b];
             int k = a * DEM_MAX_MATERIALS + b;
             t->E[k] = c->E, t->G[k] = c->G, t->gn[k] = c->gamma_n, t->gt[k] = c->gamma_t;
-            t->mu[k] = c->mu, t->st_sn[k] = c->st_sn;
+            t->mu[k] = c->mu, t->st_sn[k] = c->st_sn, t->mr[k] = c->mu_roll;
             t->rolling |= a < w->n_mat && b < w->n_mat && c->mu_roll > 0.0;
         }
 }
 
 static inline __attribute__((always_inline)) void batch_forces_body(const pair_arrays *in, const coef_table *ct,
-                                                                     pair_batch *b)
+                                                                     pair_batch *b, const int rolling)
 {
     const double *restrict r = in->r, *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
     const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
-    const double *restrict inv_m = in->inv_m, *restrict hist = in->hist;
+    const double *restrict inv_m = in->inv_m, *restrict inv_i = in->inv_i, *restrict hist = in->hist;
     const double *restrict cE = ct->E, *restrict cG = ct->G, *restrict cgn = ct->gn, *restrict cgt = ct->gt;
-    const double *restrict cmu = ct->mu, *restrict cst = ct->st_sn;
+    const double *restrict cmu = ct->mu, *restrict cst = ct->st_sn, *restrict cmr = ct->mr;
     const int *restrict bi = b->i, *restrict bj = b->j, *restrict bc = b->c, *restrict bp = b->p;
     const double *restrict bex = b->ex, *restrict bey = b->ey, *restrict bez = b->ez, *restrict bd2 = b->d2;
     double *restrict ofx = b->fx, *restrict ofy = b->fy, *restrict ofz = b->fz;
     double *restrict otix = b->tix, *restrict otiy = b->tiy, *restrict otiz = b->tiz;
     double *restrict otjx = b->tjx, *restrict otjy = b->tjy, *restrict otjz = b->tjz;
     double *restrict osx = b->sx, *restrict osy = b->sy, *restrict osz = b->sz;
-    double *restrict oR = b->R, *restrict ofn = b->fn;
     const double dt = in->dt;
     const int n = b->n;
 #pragma omp simd
@@ -331,9 +330,22 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         ofx[k] = Fx, ofy[k] = Fy, ofz[k] = Fz;
         /* torques (eq. 7) */
         double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
-        otix[k] = cx * -li, otiy[k] = cy * -li, otiz[k] = cz * -li;
-        otjx[k] = cx * -lj, otjy[k] = cy * -lj, otjz[k] = cz * -lj;
-        oR[k] = R, ofn[k] = f_n;
+        double tix = cx * -li, tiy = cy * -li, tiz = cz * -li;
+        double tjx = cx * -lj, tjy = cy * -lj, tjz = cz * -lj;
+        if (rolling) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
+            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
+            double wn = sqrt(rwx * rwx + rwy * rwy + rwz * rwz);
+            double t = cmr[c] * R * f_n;
+            double tmax = (1.0 / (inv_i[i] + inv_i[j])) * wn / dt;
+            t = t > tmax ? tmax : t;
+            double f = -t / wn; /* used only where wn > 0 */
+            const int roll = cmr[c] > 0.0, turn = roll && wn > 0.0;
+            double trx = turn ? rwx * f : 0.0, try_ = turn ? rwy * f : 0.0, trz = turn ? rwz * f : 0.0;
+            tix = roll ? tix + trx : tix, tiy = roll ? tiy + try_ : tiy, tiz = roll ? tiz + trz : tiz;
+            tjx = roll ? tjx - trx : tjx, tjy = roll ? tjy - try_ : tjy, tjz = roll ? tjz - trz : tjz;
+        }
+        otix[k] = tix, otiy[k] = tiy, otiz[k] = tiz;
+        otjx[k] = tjx, otjy[k] = tjy, otjz[k] = tjz;
     }
 }
 
@@ -341,13 +353,19 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
 __attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays *in, const coef_table *ct,
                                                                pair_batch *b)
 {
-    batch_forces_body(in, ct, b);
+    if (ct->rolling)
+        batch_forces_body(in, ct, b, 1);
+    else
+        batch_forces_body(in, ct, b, 0);
 }
 #endif
 
 static void batch_forces_portable(const pair_arrays *in, const coef_table *ct, pair_batch *b)
 {
-    batch_forces_body(in, ct, b);
+    if (ct->rolling)
+        batch_forces_body(in, ct, b, 1);
+    else
+        batch_forces_body(in, ct, b, 0);
 }
 
 typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);
@@ -362,8 +380,8 @@ static batch_fn batch_kernel(const dem_world *w)
 }
 
 /* The batch's springs back into the history and its forces into the grains,
- * in pair order (rolling resistance added here where it applies). */
-static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_batch *b, int rolling)
+ * in pair order. */
+static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_batch *b)
 {
     for (int k = 0; k < b->n; k++) {
         int p = b->p[k], i = b->i[k], j = b->j[k];
@@ -371,16 +389,6 @@ static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_
         xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
         double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
                                 b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
-        if (rolling) {
-            const dem_pair_coef *cf = &a->coef[a->mat[i]][a->mat[j]];
-            if (cf->mu_roll > 0.0) {
-                vec3 wi = v3(a->wx[i], a->wy[i], a->wz[i]), wj = v3(a->wx[j], a->wy[j], a->wz[j]);
-                vec3 tr = dem_rolling_torque(cf, b->R[k], b->fn[k], v3_sub(wi, wj),
-                                             1.0 / (a->inv_i[i] + a->inv_i[j]), a->dt);
-                f[3] += tr.x, f[4] += tr.y, f[5] += tr.z;
-                f[6] -= tr.x, f[7] -= tr.y, f[8] -= tr.z;
-            }
-        }
         add_i(s, i, f);
         add_j(s, j, f);
     }
@@ -399,7 +407,7 @@ static inline __attribute__((always_inline)) void batch_push(const pair_arrays *
     b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
     if (b->n == BATCH) {
         batch_forces(a, ct, b);
-        batch_scatter(a, s, b, ct->rolling);
+        batch_scatter(a, s, b);
         b->n = 0;
     }
 }
@@ -409,7 +417,7 @@ static inline void batch_flush(const pair_arrays *a, const force_sums *s, const 
 {
     if (b->n > 0) {
         batch_forces(a, ct, b);
-        batch_scatter(a, s, b, ct->rolling);
+        batch_scatter(a, s, b);
         b->n = 0;
     }
 }

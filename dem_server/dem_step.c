@@ -175,17 +175,6 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
         double nvx = vx[i] + fx[i] * im * dt, nvy = vy[i] + fy[i] * im * dt, nvz = vz[i] + fz[i] * im * dt;
         double nwx = wx[i] + tx[i] * ii * dt, nwy = wy[i] + ty[i] * ii * dt, nwz = wz[i] + tz[i] * ii * dt;
         double nx = x[i] + nvx * dt, ny = y[i] + nvy * dt, nz = z[i] + nvz * dt;
-        /* q <- q + dt/2 (0, ω) q, renormalised: first order in ω dt per step,
-         * the orientation does not feed back into the forces of spheres */
-        double *q = qa + 4 * (size_t)i;
-        double hx = 0.5 * dt * nwx, hy = 0.5 * dt * nwy, hz = 0.5 * dt * nwz;
-        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
-        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
-        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
-        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
-        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
-        qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
-        q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
         vx[i] = move ? nvx : vx[i], vy[i] = move ? nvy : vy[i], vz[i] = move ? nvz : vz[i];
         wx[i] = move ? nwx : wx[i], wy[i] = move ? nwy : wy[i], wz[i] = move ? nwz : wz[i];
         nx = move ? nx : x[i], ny = move ? ny : y[i], nz = move ? nz : z[i];
@@ -195,6 +184,23 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
         d2 = move ? d2 : 0.0;
         maxd2 = d2 > maxd2 ? d2 : maxd2;
         nonfinite |= !(d2 <= DBL_MAX); /* NaN or inf */
+    }
+    /* q <- q + dt/2 (0, ω) q with the new ω, renormalised: first order in
+     * ω dt per step, the orientation does not feed back into the forces of
+     * spheres. A loop of its own: the four components of a grain's q lie
+     * together, which the loop above (one grain per lane) could only gather
+     * and scatter. */
+    for (int i = lo; i < hi; i++) {
+        double *q = qa + 4 * (size_t)i;
+        double hx = 0.5 * dt * wx[i], hy = 0.5 * dt * wy[i], hz = 0.5 * dt * wz[i];
+        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
+        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
+        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
+        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
+        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+        const int move = !frozen[i];
+        qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
+        q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
     }
     *maxd2_out = maxd2;
     if (!nonfinite)

@@ -14,7 +14,7 @@ int cm_run_config_read(cm_scene *s, cm_run_config *c, cm_error *err)
         (rc = cm_scene_double_opt(s, "run.checkpoint_every", 0.0, 1e6, 0.0, &c->checkpoint_every, err)) ||
         (rc = cm_scene_double(s, "coupling.dt", 1e-12, 1.0, &c->dt, err)) ||
         (rc = cm_scene_int_opt(s, "coupling.exchange_every", 1, 100000, 1, &every, err)) ||
-        (rc = cm_scene_double_opt(s, "coupling.stall_timeout", 0.1, 60.0, 1.0, &c->stall_timeout, err)) ||
+        (rc = cm_scene_double_opt(s, "coupling.stall_timeout", 0.1, 60.0, 10.0, &c->stall_timeout, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.connect_timeout", 1.0, 3600.0, 120.0, &c->connect_timeout, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.max_overlap", 0.0, 1.0, 0.2, &c->max_overlap, err)) ||
         (rc = cm_scene_double_opt(s, "coupling.max_surface_overlap", 0.0, 1.0, 0.5, &c->max_surface_overlap,

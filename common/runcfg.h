@@ -14,7 +14,7 @@ typedef struct cm_run_config {
                               only when a server is interrupted by SIGINT/SIGTERM) */
     double dt;             /* coupling.dt, s: the DEM time step */
     int exchange_every;    /* coupling.exchange_every: DEM steps per exchange (default 1) */
-    double stall_timeout;  /* coupling.stall_timeout, s: peer silent this long counts as dead (default 1) */
+    double stall_timeout;  /* coupling.stall_timeout, s: a live peer silent this long counts as hung (default 10; a dead one is seen at once by its pid) */
     double connect_timeout;/* coupling.connect_timeout, s: wait this long for the peer to start (default 120) */
     double max_overlap;    /* coupling.max_overlap: stop when a grain–grain or grain–wall overlap exceeds this
                               fraction of the radius (default 0.2; 0 = never) */

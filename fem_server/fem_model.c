@@ -467,7 +467,6 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
      * forces are rotated into the rim frame with R at its start (the wheel
      * turns by omega * interval ~ 1e-4 rad per exchange). */
     fem_model_build_load(m, f_iface);
-    fem_solver_load_changed(m->s);
     if (m->cfg.integrator == FEM_INTEGRATOR_NEWMARK && m->s->h_eff != h) {
         if (m->s->h_eff != 0.0)
             cm_log_warn("fem: sub-step changed from %.6g s to %.6g s: refactorizing K_eff (keep the exchange "
@@ -481,6 +480,7 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
             return rc;
     }
     fem_solver *s = m->s;
+    fem_solver_load_changed(s); /* after the prepare: it reads the integrator */
     if (!m->energy_started) {
         m->energy0 = mechanical_energy(m);
         m->energy_started = true;

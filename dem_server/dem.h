@@ -230,6 +230,8 @@ typedef struct dem_surface_total {
     double traction_neg; /* N, T_R: sum of negative per-contact components (<= 0) */
     int contacts;        /* grain–surface contacts after de-duplication */
     double max_overlap;  /* largest grain–surface overlap / grain radius (the run-time guard's) */
+    double energy;       /* J, elastic energy stored in the grain–surface contacts (Hertz, dem_hertz_energy):
+                            the interface's energy scale, sent to the FEM for its work guard */
 } dem_surface_total;
 
 /* Per-node forces ON the surface from the last dem_step_surface (3n, N),

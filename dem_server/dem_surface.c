@@ -199,6 +199,7 @@ typedef struct dem_surf_scratch surf_scratch;
 typedef struct surf_rec {
     double fs[3], mom[3]; /* reaction on the surface, its moment about the reference point */
     double along, overlap; /* reaction along the travel direction; overlap / radius */
+    double energy;        /* J, the contact's stored Hertz energy */
     int n_nodes;          /* node_add entries of the contact, following the previous contact's */
 } surf_rec;
 
@@ -837,6 +838,7 @@ static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_tota
             tot->traction_neg += rc->along;
         tot->contacts++;
         tot->max_overlap = fmax(tot->max_overlap, rc->overlap);
+        tot->energy += rc->energy;
     }
 }
 
@@ -1058,6 +1060,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 v3_store(rc->mom, v3_cross(v3_sub(p, ref), Fs));
                 rc->along = v3_dot(Fs, dir);
                 rc->overlap = delta / Rc;
+                rc->energy = dem_hertz_energy(cf, Rc, delta);
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;

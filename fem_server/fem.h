@@ -124,6 +124,8 @@ typedef struct fem_config {
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
     int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
     double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
+    double interface_mass_min; /* kg: interface nodes lighter than this are given this mass (selective mass
+                                  scaling for a longer exchange interval, fem_model.c); 0 = none */
     int n_supports;          /* 0: the rim set clamped (all three components at 0) */
     fem_support supports[FEM_MAX_BC];
     int n_loads;             /* dead loads besides pressure and gravity (rim frame) */
@@ -222,6 +224,9 @@ void fem_rim_reaction(const fem_model *m, double force[3], double torque[3]);
 /* Mass [kg] of the tire mesh (sum of the lumped masses of eq. 33) and its
  * moment of inertia [kg m^2] about the axle (the rim frame's y axis). */
 void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle);
+
+/* Mass [kg] added to the interface nodes by fem.interface_mass_min (0 without). */
+double fem_added_mass(const fem_model *m);
 
 /* Mesh sizes, and the node displacements in the rim frame (3 per node). */
 void fem_mesh_size(const fem_model *m, int *n_nodes, int *n_tets);

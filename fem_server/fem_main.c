@@ -234,6 +234,13 @@ static int run(const options *o)
 
     double mesh_mass, mesh_inertia;
     fem_mass_properties(model, &mesh_mass, &mesh_inertia);
+    if (cfg.interface_mass_min > 0) {
+        double added = fem_added_mass(model);
+        cm_log_info("fem: interface nodes raised to %.3g kg (fem.interface_mass_min): %.4g kg added, %.3g %% of the "
+                    "body's %.4g kg", cfg.interface_mass_min, added, 100 * added / mesh_mass, mesh_mass);
+        cm_runrec_num(&rec, "added_mass", added);
+        cm_runrec_num(&rec, "added_mass_fraction", added / mesh_mass);
+    }
     drive_resolve(&drive, mesh_mass, mesh_inertia);
     if (drive.motion != DRIVE_HOLD) {
         char used[160] = "";

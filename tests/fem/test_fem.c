@@ -1169,6 +1169,85 @@ static int subcycling(void)
 
 /* ---- Scene section ------------------------------------------------------------ */
 
+/* fem.interface_mass_min: every free interface node lighter than m_min
+ * gets m_min in all three components (1/m too), no other node changes, the
+ * added mass is the sum of the differences, the explicit limit does not
+ * shrink, the DEM is told the new masses; a negative value is refused
+ * naming the key, and the key reads from a scene. */
+static int interface_mass_scaling(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.box_cells[1] = c.box_cells[2] = 2;
+    fem_model *a, *b;
+    cm_error err = {0};
+    ENSURE(fem_create(&c, &a, &err) == CM_OK);
+    uint32_t nn;
+    fem_interface_count(a, &nn, NULL);
+    double *ma = calloc(nn, sizeof *ma), *mb = calloc(nn, sizeof *mb);
+    ENSURE(ma && mb);
+    fem_interface_masses(a, ma);
+    double lo = INFINITY, hi = 0.0;
+    for (uint32_t k = 0; k < nn; k++)
+        if (ma[k] > 0.0)
+            lo = fmin(lo, ma[k]), hi = fmax(hi, ma[k]);
+    ENSURE(lo < hi);
+    c.interface_mass_min = 0.5 * (lo + hi);
+    ENSURE(fem_create(&c, &b, &err) == CM_OK);
+    fem_interface_masses(b, mb);
+    double added = 0.0;
+    for (uint32_t k = 0; k < nn; k++) {
+        if (ma[k] == 0.0) { /* on the clamped rim: stays fixed */
+            ENSURE(mb[k] == 0.0);
+            continue;
+        }
+        ENSURE(mb[k] == fmax(ma[k], c.interface_mass_min));
+        added += mb[k] - ma[k];
+        size_t d = 3 * (size_t)b->if_nodes[k];
+        for (int q = 0; q < 3; q++)
+            ENSURE(b->s->fixed[d + q] || (b->s->mass[d + q] == mb[k] && b->s->inv_mass[d + q] == 1.0 / mb[k]));
+    }
+    double mass_a, mass_b, ia, ib;
+    fem_mass_properties(a, &mass_a, &ia);
+    fem_mass_properties(b, &mass_b, &ib);
+    printf("  interface nodes %.4g ... %.4g kg raised to %.4g kg: %.4g kg added (%.3g %% of %.4g kg); explicit limit "
+           "%.4g -> %.4g s\n", lo, hi, c.interface_mass_min, fem_added_mass(b), 100 * fem_added_mass(b) / mass_a,
+           mass_a, a->stab.dt_limit, b->stab.dt_limit);
+    ENSURE(added > 0.0 && fem_added_mass(a) == 0.0);
+    ENSURE_REL(fem_added_mass(b), added, 1e-12);
+    ENSURE_REL(mass_b - mass_a, added, 1e-9);
+    ENSURE(b->stab.dt_limit >= a->stab.dt_limit * (1.0 - 1e-6));
+    for (int d = 0; d < a->s->n_dof; d++) /* nodes off the interface keep their masses */
+        ENSURE(a->s->mass[d] == b->s->mass[d] || b->s->mass[d] == c.interface_mass_min);
+    free(ma);
+    free(mb);
+    fem_destroy(&a);
+    fem_destroy(&b);
+
+    static const char *const sections[] = {"fem", NULL};
+    const char *good = "fem = {\n  mesh = { type = \"box\"; size = [0.2, 0.1, 0.1]; cells = [4, 2, 2]; };\n"
+                       "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n"
+                       "  integrator = \"explicit\"; dt = 1e-5; interface_mass_min = 2.5e-3; };\n";
+    cm_scene *s;
+    ENSURE(cm_scene_open_string(good, "good.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE_MSG(fem_config_read(s, &c, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s", err.msg);
+    ENSURE(c.interface_mass_min == 2.5e-3);
+    cm_scene_close(&s);
+    const char *bad = "fem = {\n  mesh = { type = \"box\"; size = [0.2, 0.1, 0.1]; cells = [4, 2, 2]; };\n"
+                      "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n"
+                      "  integrator = \"explicit\"; dt = 1e-5; interface_mass_min = -1.0; };\n";
+    ENSURE(cm_scene_open_string(bad, "bad.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE(fem_config_read(s, &c, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "fem.interface_mass_min"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
 static int config_from_scene(void)
 {
     const char *text = "fem = {\n"
@@ -1546,6 +1625,7 @@ int main(int argc, char **argv)
         {"step_load_from_interval_start", step_load_from_interval_start},
         {"staggered_contact_spring", staggered_contact_spring},
         {"config_from_scene", config_from_scene},
+        {"interface_mass_scaling", interface_mass_scaling},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},
         {"snapshot_world_frame", snapshot_world_frame},

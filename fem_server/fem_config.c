@@ -252,6 +252,19 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     TRY(cm_scene_double_opt(s, "fem.interface_mass_min", 0.0, 1e3, 0.0, &c->interface_mass_min, err));
     TRY(read_supports(s, c, err));
     TRY(read_loads(s, c, err));
+    if (cm_scene_has(s, "fem.floor")) {
+        c->floor = true;
+        TRY(cm_scene_choice_opt(s, "fem.floor.set", fem_set_names, FEM_SET_CONTACT, &k, err));
+        c->floor_set = (fem_set)k;
+        int has_h = cm_scene_has(s, "fem.floor.height"), has_l = cm_scene_has(s, "fem.floor.load");
+        if (has_h == has_l)
+            return cm_fail(err, CM_ERR_KEY, "%s: fem.floor needs exactly one of height (m, the plane z = height in "
+                           "the rim frame) and load (N, the load the floor must carry)", cm_scene_path(s));
+        if (has_h)
+            TRY(cm_scene_double(s, "fem.floor.height", -1e3, 1e3, &c->floor_height, err));
+        else
+            TRY(cm_scene_double(s, "fem.floor.load", 1e-9, 1e12, &c->floor_load, err));
+    }
     static const char *const analyses[] = {"static", "dynamic", NULL};
     TRY(cm_scene_choice_opt(s, "fem.analysis", analyses, FEM_ANALYSIS_STATIC, &k, err));
     c->analysis = (fem_analysis)k;

@@ -1248,6 +1248,126 @@ static int interface_mass_scaling(void)
     return 0;
 }
 
+/* fem.floor, the rigid frictionless floor (kinematic), on a closed form: a
+ * 20 mm cube on rollers (xmin: x, ymin: y), its top held (zmax: z = 0),
+ * the floor pressed d = 0.2 mm up into its bottom: uniaxial stress E d / H,
+ * a reaction of E A d / H = 40 N exactly (linear tetrahedra are exact under
+ * uniform strain), every bottom node held, none below the plane; asked for
+ * a load of 40 N instead, the floor is found at d. */
+static int floor_block_closed_form(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = c.box_size[1] = c.box_size[2] = 0.02;
+    c.box_cells[0] = c.box_cells[1] = c.box_cells[2] = 2;
+    c.E = 1e7;
+    c.nu = 0.3;
+    c.pressure = 0.0;
+    c.gravity[2] = 0.0;
+    c.integrator = FEM_INTEGRATOR_RIGID; /* a static case: no stability analysis */
+    c.n_supports = 3;
+    c.supports[0] = (fem_support){.set = FEM_SET_XMIN, .fix = {true, false, false}};
+    c.supports[1] = (fem_support){.set = FEM_SET_YMIN, .fix = {false, true, false}};
+    c.supports[2] = (fem_support){.set = FEM_SET_ZMAX, .fix = {false, false, true}};
+    c.floor = true;
+    c.floor_set = FEM_SET_ZMIN;
+    const double d = 2e-4, expect = 1e7 * 0.02 * 0.02 * d / 0.02;
+    c.floor_height = d;
+    fem_model *m;
+    cm_error err = {0};
+    fem_floor_result r;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    printf("  cube pressed %.1f mm: reaction %.9g N (E A d / H = %.9g N) on %d nodes, deepest %.2g m below, %d "
+           "solves\n", 1e3 * d, r.reaction, expect, r.contact_nodes, r.max_below, r.solves);
+    ENSURE_REL(r.reaction, expect, 1e-9);
+    ENSURE(r.contact_nodes == 9 && r.max_below <= 1e-15);
+    ENSURE_NEAR(r.deflection, d, 1e-15);
+    fem_destroy(&m);
+    c.floor_height = 0.0;
+    c.floor_load = expect;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    printf("  asked for %.6g N: floor at %.9g m (d = %.9g m), reaction %.9g N, %d solves\n", expect, r.height, d,
+           r.reaction, r.solves);
+    ENSURE_REL(r.reaction, expect, 1e-6);
+    ENSURE_REL(r.height, d, 1e-6);
+    fem_destroy(&m);
+    return 0;
+}
+
+/* The inflated small tire pressed onto the floor until it carries 400 N
+ * (no gravity): the floor's reaction is the load, the rim holds the tire
+ * with the opposite force (the balance of the whole body), no node of the
+ * tread is below the plane, and only a patch touches (the active set let
+ * go of the nodes the plane would pull). */
+static int floor_tire_balance(void)
+{
+    fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
+    c.gravity[2] = 0.0;
+    c.floor = true;
+    c.floor_set = FEM_SET_CONTACT;
+    c.floor_load = 400.0;
+    fem_model *m;
+    cm_error err = {0};
+    fem_floor_result r;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    double F[3], T[3];
+    fem_rim_reaction(m, F, T);
+    uint32_t nn;
+    fem_interface_count(m, &nn, NULL);
+    printf("  small tire, 0.14 MPa, 400 N: floor at %.6g m, deflection %.4f mm, %d nodes touch (of %u tread "
+           "nodes), deepest %.2g m below; rim force %.6g %.6g %.6g N; %d solves\n",
+           r.height, 1e3 * r.deflection, r.contact_nodes, nn, r.max_below, F[0], F[1], F[2], r.solves);
+    ENSURE_REL(r.reaction, 400.0, 1e-6);
+    ENSURE_NEAR(F[2], -r.reaction, 1e-6 * 400.0);
+    ENSURE_NEAR(F[0], 0.0, 1e-3 * 400.0);
+    ENSURE(r.max_below <= 1e-12 && r.deflection > 0.0);
+    ENSURE(r.contact_nodes >= 3 && (uint32_t)r.contact_nodes < nn / 4);
+    fem_destroy(&m);
+    return 0;
+}
+
+/* fem.floor's keys: read from a scene, exactly one of height and load,
+ * the set named, a misspelt key refused by the strict check. */
+static int floor_keys_checked(void)
+{
+    static const char *const sections[] = {"fem", NULL};
+    const char *head = "fem = {\n  mesh = { type = \"box\"; size = [0.02, 0.02, 0.02]; cells = [2, 2, 2]; };\n"
+                       "  material = { E = 1.0e7; nu = 0.3; rho = 1000.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n";
+    static const struct { const char *floor; int ok; const char *msg; } cases[] = {
+        {"floor = { set = \"zmin\"; height = 2e-4; };", 1, NULL},
+        {"floor = { load = 400.0; };", 1, NULL},
+        {"floor = { set = \"zmin\"; height = 2e-4; load = 40.0; };", 0, "exactly one of height"},
+        {"floor = { set = \"zmin\"; };", 0, "exactly one of height"},
+        {"floor = { set = \"bottom\"; height = 0.0; };", 0, "fem.floor.set"},
+        {"floor = { load = -1.0; };", 0, "fem.floor.load"},
+        {"floor = { height = 0.0; heigth = 1.0; };", -1, "heigth"},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        char text[1024];
+        snprintf(text, sizeof text, "%s  %s\n};\n", head, cases[k].floor);
+        cm_scene *s;
+        cm_error err = {0};
+        ENSURE(cm_scene_open_string(text, "floor.cfg", &s, &err) == CM_OK);
+        fem_config c = fem_config_default();
+        int rc = fem_config_read(s, &c, &err);
+        if (rc == CM_OK && cases[k].ok == -1)
+            rc = cm_scene_check_unknown(s, sections, &err);
+        else if (rc == CM_OK)
+            ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s: %s", cases[k].floor, err.msg);
+        ENSURE_MSG(cases[k].ok == 1 ? rc == CM_OK : rc != CM_OK, "%s", cases[k].floor);
+        if (cases[k].msg)
+            ENSURE_MSG(strstr(err.msg, cases[k].msg), "%s: %s", cases[k].floor, err.msg);
+        if (cases[k].ok == 1)
+            ENSURE(c.floor && (k == 0 ? c.floor_set == FEM_SET_ZMIN && c.floor_height == 2e-4 && c.floor_load == 0
+                                      : c.floor_set == FEM_SET_CONTACT && c.floor_load == 400.0));
+        cm_scene_close(&s);
+    }
+    return 0;
+}
+
 static int config_from_scene(void)
 {
     const char *text = "fem = {\n"
@@ -1626,6 +1746,9 @@ int main(int argc, char **argv)
         {"staggered_contact_spring", staggered_contact_spring},
         {"config_from_scene", config_from_scene},
         {"interface_mass_scaling", interface_mass_scaling},
+        {"floor_block_closed_form", floor_block_closed_form},
+        {"floor_tire_balance", floor_tire_balance},
+        {"floor_keys_checked", floor_keys_checked},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},
         {"snapshot_world_frame", snapshot_world_frame},

@@ -232,6 +232,8 @@ typedef struct dem_surface_total {
     double max_overlap;  /* largest grain–surface overlap / grain radius (the run-time guard's) */
     int worst_grain;     /* slot of the grain with that overlap, its triangle (when contacts > 0) */
     int worst_tri;
+    double energy;       /* J, elastic energy stored in the grain–surface contacts (Hertz, dem_hertz_energy):
+                            the interface's energy scale, sent to the FEM for its work guard */
 } dem_surface_total;
 
 /* Per-node forces ON the surface from the last dem_step_surface (3n, N),

@@ -123,6 +123,7 @@ static int stage_surface(coupled *c, const dem_coupled_def *def, int finish, dem
         acc->traction_pos += tt.traction_pos;
         acc->traction_neg += tt.traction_neg;
         acc->contacts += tt.contacts;
+        acc->energy += tt.energy;
         if (j < k_steps - 1 && (rc = dem_step_grains(c->w, err)))
             return rc;
     }
@@ -159,6 +160,7 @@ static int stage_send(coupled *c, const dem_coupled_def *def, int finish, double
         out->info[IPC_INFO_DEM_WORK] = c->w_dem;
         out->info[IPC_INFO_BED_HEIGHT] = def->bed_height;
         out->info[IPC_INFO_BED_TOP] = def->bed_top;
+        out->info[IPC_INFO_CONTACT_ENERGY] = acc->energy * inv;
         if (def->interrupt && *def->interrupt && !*asked_checkpoint) {
             out->flags |= IPC_FLAG_CHECKPOINT; /* interrupted: checkpoint this exchange, then stop */
             *asked_checkpoint = 1;

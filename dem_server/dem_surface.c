@@ -199,6 +199,7 @@ typedef struct dem_surf_scratch surf_scratch;
 typedef struct surf_rec {
     double fs[3], mom[3]; /* reaction on the surface, its moment about the reference point */
     double along, overlap; /* reaction along the travel direction; overlap / radius */
+    double energy;        /* J, the contact's stored Hertz energy */
     int n_nodes;          /* node_add entries of the contact, following the previous contact's */
     int grain, tri;       /* slot of the grain and the contact's triangle (the guard names them) */
 } surf_rec;
@@ -839,6 +840,7 @@ static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_tota
         tot->contacts++;
         if (rc->overlap > tot->max_overlap)
             tot->max_overlap = rc->overlap, tot->worst_grain = rc->grain, tot->worst_tri = rc->tri;
+        tot->energy += rc->energy;
     }
 }
 
@@ -1062,6 +1064,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 rc->overlap = delta / Rc;
                 rc->grain = i;
                 rc->tri = cd[a].tri;
+                rc->energy = dem_hertz_energy(cf, Rc, delta);
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;

@@ -124,11 +124,20 @@ typedef struct fem_config {
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
     int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
     double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
+    double interface_mass_min; /* kg: interface nodes lighter than this are given this mass (selective mass
+                                  scaling for a longer exchange interval, fem_model.c); 0 = none */
     int n_supports;          /* 0: the rim set clamped (all three components at 0) */
     fem_support supports[FEM_MAX_BC];
     int n_loads;             /* dead loads besides pressure and gravity (rim frame) */
     fem_load loads[FEM_MAX_BC];
     fem_analysis analysis;   /* fem_server --fem-only: static solve, or from rest to run.end_time */
+    /* fem.floor (--fem-only static): a rigid frictionless plane z = floor_height (rim frame) that the
+     * nodes of floor_set may touch but not pass (kinematic: exact, fem_bc.c); with floor_load > 0 the
+     * height is found at which the floor carries that load (N). */
+    bool floor;
+    fem_set floor_set;
+    double floor_height;     /* m */
+    double floor_load;       /* N, 0: the height is given */
 } fem_config;
 
 fem_config fem_config_default(void);
@@ -222,6 +231,25 @@ void fem_rim_reaction(const fem_model *m, double force[3], double torque[3]);
 /* Mass [kg] of the tire mesh (sum of the lumped masses of eq. 33) and its
  * moment of inertia [kg m^2] about the axle (the rim frame's y axis). */
 void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle);
+
+/* The static solve against the rigid frictionless floor of cfg.floor (kinematic: the touching
+ * nodes' z held on the plane, an active set iterated until every held node is pushed, not
+ * pulled, and no free node is below the plane); with cfg.floor_load the height is searched
+ * (bracketed secant) until the floor carries that load within 1e-6. */
+typedef struct fem_floor_result {
+    double height;      /* m, the floor plane (rim frame) */
+    double deflection;  /* m, height - z_free: how far the floor pressed in */
+    double z_free;      /* m, the set's lowest z under the loads without the floor (the inflated tire's
+                           bottom); the undeformed lowest z when the body needs the floor to be held */
+    double reaction;    /* N, the floor's push on the body (+z) */
+    double max_below;   /* m, the deepest node of the set below the plane (0 up to round-off) */
+    int contact_nodes;  /* nodes held on the plane */
+    int solves;         /* linear solves done */
+} fem_floor_result;
+int fem_floor_static(fem_model *m, fem_floor_result *r, cm_error *err);
+
+/* Mass [kg] added to the interface nodes by fem.interface_mass_min (0 without). */
+double fem_added_mass(const fem_model *m);
 
 /* Mesh sizes, and the node displacements in the rim frame (3 per node). */
 void fem_mesh_size(const fem_model *m, int *n_nodes, int *n_tets);

@@ -2,6 +2,8 @@
  * fem.supports and fem.loads (fem_config.c), applied by fem_create. */
 #include "fem_bc.h"
 
+#include "fem_model.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -201,5 +203,193 @@ int fem_bc_loads(const fem_mesh *m, const fem_config *cfg, double *f, cm_error *
         }
     }
     free(in);
+    return rc;
+}
+
+/* ---- fem.floor: a rigid frictionless floor, kinematic ------------------------------------------------- */
+
+typedef struct floor_ctx {
+    fem_model *m;
+    uint8_t *cand, *active;  /* per node: of the floor set; held on the plane */
+    uint8_t *base_fixed;     /* per dof: the supports */
+    double *base_val, *val;  /* per dof: their values; this solve's */
+    double *r;               /* per dof: K u - b */
+    double zmin;             /* m, the set's lowest z without the floor (fem_floor_result.z_free) */
+    int solves;
+} floor_ctx;
+
+/* The static state with the floor at `height`: the active set (nodes held
+ * at z = height) grows by the free nodes found below the plane and loses
+ * the held nodes the plane pulls (K u - b < 0 in z), until neither happens.
+ * Frictionless: only z is held. Each pass refactorizes K_ff (CHOLMOD). */
+static int floor_solve(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
+{
+    fem_model *m = c->m;
+    fem_solver *s = m->s;
+    const int nn = m->mesh.n_nodes, nd = s->n_dof;
+    const double tol = 1e-12 * (m->size > 0 ? m->size : 1.0);
+    for (int n = 0; n < nn; n++) /* start: the nodes at or below the plane */
+        c->active[n] = c->cand[n] && m->mesh.x[3 * n + 2] <= height + tol;
+    for (int pass = 0; pass < 200; pass++) {
+        memcpy(s->fixed, c->base_fixed, (size_t)nd);
+        memcpy(c->val, c->base_val, (size_t)nd * sizeof *c->val);
+        for (int n = 0; n < nn; n++)
+            if (c->active[n]) {
+                s->fixed[3 * n + 2] = 1;
+                c->val[3 * n + 2] = height - m->mesh.x[3 * n + 2];
+            }
+        int rc = fem_solver_constrain(s, s->fixed, c->val, err);
+        if (rc)
+            return rc;
+        fem_model_build_load(m, NULL);
+        rc = fem_solver_static(s, s->f, m->cfg.static_solver, m->cfg.cg_tol, m->cfg.cg_max_iter, s->u, NULL, err);
+        c->solves++;
+        if (rc)
+            return cm_fail_prefix(err, "fem.floor: static solve");
+        fem_solver_matvec(s, s->u, c->r);
+        int changed = 0;
+        double reaction = 0.0, below = 0.0;
+        int held = 0;
+        for (int n = 0; n < nn; n++) {
+            if (!c->cand[n])
+                continue;
+            int dz = 3 * n + 2;
+            double rz = c->r[dz] - s->f[dz], z = m->mesh.x[dz] + s->u[dz];
+            if (c->active[n]) {
+                if (rz < 0.0) { /* pulled: let go */
+                    c->active[n] = 0;
+                    changed = 1;
+                } else {
+                    reaction += rz;
+                    held++;
+                }
+            } else if (z < height - tol) {
+                c->active[n] = 1;
+                changed = 1;
+            } else {
+                below = fmax(below, height - z);
+            }
+        }
+        if (!changed) {
+            fem_solver_set_state(s, s->u, NULL);
+            m->static_done = true;
+            res->height = height;
+            res->deflection = height - c->zmin;
+            res->z_free = c->zmin;
+            res->reaction = reaction;
+            res->max_below = below;
+            res->contact_nodes = held;
+            res->solves = c->solves;
+            return CM_OK;
+        }
+    }
+    return cm_fail(err, CM_ERR_NUMERIC, "fem.floor: the contact set did not settle in 200 passes (floor at z = %.6g m)",
+                   height);
+}
+
+int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
+{
+    const fem_config *cfg = &m->cfg;
+    if (!cfg->floor)
+        return cm_fail(err, CM_ERR_STATE, "fem_floor_static: no fem.floor in the scene");
+    fem_solver *s = m->s;
+    const int nn = m->mesh.n_nodes, nd = s->n_dof;
+    floor_ctx c = {.m = m};
+    c.cand = calloc((size_t)nn, 1);
+    c.active = calloc((size_t)nn, 1);
+    c.base_fixed = malloc((size_t)nd);
+    c.base_val = malloc((size_t)nd * sizeof *c.base_val);
+    c.val = malloc((size_t)nd * sizeof *c.val);
+    c.r = malloc((size_t)nd * sizeof *c.r);
+    int rc = CM_OK;
+    if (!c.cand || !c.active || !c.base_fixed || !c.base_val || !c.val || !c.r) {
+        rc = cm_fail(err, CM_ERR_NOMEM, "fem.floor: out of memory");
+        goto done;
+    }
+    planes p = box_planes(&m->mesh);
+    if (set_nodes(&m->mesh, &p, cfg->floor_set, c.cand) == 0) {
+        rc = cm_fail(err, CM_ERR_RANGE, "%s: fem.floor.set: the set %s has no nodes", m->mesh.source,
+                     fem_set_names[cfg->floor_set]);
+        goto done;
+    }
+    memcpy(c.base_fixed, s->fixed, (size_t)nd);
+    memcpy(c.base_val, s->u_fixed, (size_t)nd * sizeof *c.base_val);
+    c.zmin = INFINITY;
+    for (int n = 0; n < nn; n++)
+        if (c.cand[n])
+            c.zmin = fmin(c.zmin, m->mesh.x[3 * n + 2]);
+    { /* the lowest point under the loads alone (the inflated tire), when the supports hold the body */
+        fem_floor_result r0;
+        cm_error e0 = {0};
+        if (floor_solve(&c, -1e30, &r0, &e0) == CM_OK) {
+            double z = INFINITY;
+            for (int n = 0; n < nn; n++)
+                if (c.cand[n])
+                    z = fmin(z, m->mesh.x[3 * n + 2] + s->u[3 * n + 2]);
+            c.zmin = z;
+        }
+    }
+    if (!(cfg->floor_load > 0)) {
+        rc = floor_solve(&c, cfg->floor_height, res, err);
+        goto done;
+    }
+    /* The height at which the floor carries floor_load: R(h) grows with h.
+     * Bracket from the lowest point upwards (doubling steps of 1e-3 of the
+     * body's size), then the Illinois variant of regula falsi. */
+    const double L = cfg->floor_load;
+    double h_lo = c.zmin - 1e-3 * m->size, step = 1e-3 * m->size, h_hi;
+    fem_floor_result r_lo, r_hi;
+    if ((rc = floor_solve(&c, h_lo, &r_lo, err)))
+        goto done;
+    while (r_lo.reaction > L) { /* already above the load (e.g. the inflated tire bulges down) */
+        h_lo -= step, step *= 2;
+        if ((rc = floor_solve(&c, h_lo, &r_lo, err)))
+            goto done;
+    }
+    h_hi = h_lo + step;
+    for (;;) {
+        if ((rc = floor_solve(&c, h_hi, &r_hi, err)))
+            goto done;
+        if (r_hi.reaction >= L)
+            break;
+        h_lo = h_hi, r_lo = r_hi, step *= 2, h_hi = h_lo + step;
+        if (step > m->size) {
+            rc = cm_fail(err, CM_ERR_NUMERIC, "fem.floor.load = %g N: not reached with the floor %g m into the body "
+                         "(%g N)", L, h_hi - c.zmin, r_hi.reaction);
+            goto done;
+        }
+    }
+    double f_lo = r_lo.reaction - L, f_hi = r_hi.reaction - L;
+    int side = 0;
+    for (int it = 0; it < 100; it++) {
+        double h = (h_lo * f_hi - h_hi * f_lo) / (f_hi - f_lo);
+        fem_floor_result r;
+        if ((rc = floor_solve(&c, h, &r, err)))
+            goto done;
+        double fr = r.reaction - L;
+        if (fabs(fr) <= 1e-6 * L || h_hi - h_lo <= 1e-12 * m->size) {
+            *res = r;
+            goto done;
+        }
+        if (fr > 0) {
+            h_hi = h, f_hi = fr;
+            if (side == -1)
+                f_lo *= 0.5;
+            side = -1;
+        } else {
+            h_lo = h, f_lo = fr;
+            if (side == 1)
+                f_hi *= 0.5;
+            side = 1;
+        }
+    }
+    rc = cm_fail(err, CM_ERR_NUMERIC, "fem.floor.load = %g N: the height search did not converge", L);
+done:
+    free(c.cand);
+    free(c.active);
+    free(c.base_fixed);
+    free(c.base_val);
+    free(c.val);
+    free(c.r);
     return rc;
 }

@@ -48,6 +48,12 @@ static void visit_model(cm_ckpt *ck, fem_model *m)
     cm_ckpt_long(ck, "/model/advances", &m->advances);
     cm_ckpt_double(ck, "/model/max_substep", &m->max_substep);
     cm_ckpt_f64(ck, "/model/if_force", m->if_force, 3 * (size_t)m->n_if_nodes);
+    if (!ck->writing && ck->rc == CM_OK) {
+        /* a was left by the last step under f, whose last sub-step was
+         * max_substep: what fem_solver_load_changed corrects from */
+        memcpy(s->f_applied, s->f, nd * sizeof *s->f);
+        s->h_last = m->cfg.integrator == FEM_INTEGRATOR_EXPLICIT ? m->max_substep : 0.0;
+    }
 }
 
 static void visit_run(cm_ckpt *ck, fem_ckpt_run *r)

@@ -38,6 +38,11 @@
  *   power_iterations = 300;     # stable-step estimate
  *   check_every = 10;           # energy-growth guard every N exchanges, element guard (inverted, or
  *   max_strain = 0.5;           #   |strain component| above max_strain) every 10 N; 0 = never
+ *   interface_mass_min = 0.0;   # kg, optional: interface nodes lighter than this get this mass
+ *                               # (selective mass scaling, fem_model.c): a grain contact of stiffness
+ *                               # k_c on a node of mass m exchanged every H s is stable for
+ *                               # H < 2 sqrt(m / (k_c + k_node)); the added mass is logged and
+ *                               # written to fem_run.json (added_mass, added_mass_fraction)
  *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
  *   # Supports and dead loads by set (optional; sets: rim, cavity, contact, and the planes of the
  *   # mesh's bounding box xmin, xmax, ymin, ymax, zmin, zmax). Without supports the rim is clamped.
@@ -244,8 +249,22 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
     TRY(read_int_opt(s, "fem.output.every", 0, 1000000000, 0, &c->output_every, err));
     TRY(read_int_opt(s, "fem.check_every", 0, 1000000000, c->check_every, &c->check_every, err));
     TRY(cm_scene_double_opt(s, "fem.max_strain", 1e-6, 100.0, c->max_strain, &c->max_strain, err));
+    TRY(cm_scene_double_opt(s, "fem.interface_mass_min", 0.0, 1e3, 0.0, &c->interface_mass_min, err));
     TRY(read_supports(s, c, err));
     TRY(read_loads(s, c, err));
+    if (cm_scene_has(s, "fem.floor")) {
+        c->floor = true;
+        TRY(cm_scene_choice_opt(s, "fem.floor.set", fem_set_names, FEM_SET_CONTACT, &k, err));
+        c->floor_set = (fem_set)k;
+        int has_h = cm_scene_has(s, "fem.floor.height"), has_l = cm_scene_has(s, "fem.floor.load");
+        if (has_h == has_l)
+            return cm_fail(err, CM_ERR_KEY, "%s: fem.floor needs exactly one of height (m, the plane z = height in "
+                           "the rim frame) and load (N, the load the floor must carry)", cm_scene_path(s));
+        if (has_h)
+            TRY(cm_scene_double(s, "fem.floor.height", -1e3, 1e3, &c->floor_height, err));
+        else
+            TRY(cm_scene_double(s, "fem.floor.load", 1e-9, 1e12, &c->floor_load, err));
+    }
     static const char *const analyses[] = {"static", "dynamic", NULL};
     TRY(cm_scene_choice_opt(s, "fem.analysis", analyses, FEM_ANALYSIS_STATIC, &k, err));
     c->analysis = (fem_analysis)k;

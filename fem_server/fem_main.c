@@ -106,12 +106,15 @@ static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, double lug_pe
  * loads, or (fem.analysis = "dynamic") the response from rest to
  * run.end_time, snapshots every fem.output.every steps. Results in fem.h5
  * and fem_series.csv. */
-static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_error *err)
+static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_run_record *rec, cm_error *err)
 {
     double end_time = 0;
     int rc = cm_scene_double_opt(scene, "run.end_time", 0.0, 1e9, 0.0, &end_time, err);
     if (rc)
         return rc;
+    if (cfg->floor && cfg->analysis != FEM_ANALYSIS_STATIC)
+        return cm_fail(err, CM_ERR_KEY, "%s: fem.floor needs fem.analysis = \"static\" (the kinematic floor is an "
+                       "active set of the static solve)", o->scene);
     if (cfg->analysis == FEM_ANALYSIS_DYNAMIC && !(end_time > 0))
         return cm_fail(err, CM_ERR_KEY, "%s: fem.analysis = \"dynamic\" needs run.end_time > 0", o->scene);
     cm_scene_mark_known(scene, "run");
@@ -126,7 +129,21 @@ static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_e
     if ((rc = fem_create(cfg, &m, err)))
         return rc;
     double t0 = cm_now();
-    if (cfg->analysis == FEM_ANALYSIS_STATIC) {
+    if (cfg->analysis == FEM_ANALYSIS_STATIC && cfg->floor) {
+        fem_floor_result fr;
+        if ((rc = fem_floor_static(m, &fr, err)) == CM_OK) {
+            cm_log_info("floor: at z = %.6g m, %.6g m above the set's lowest point (the deflection): reaction %.6g N "
+                        "on %d nodes, deepest node %.3g m below it; %d linear solves in %.2f s",
+                        fr.height, fr.deflection, fr.reaction, fr.contact_nodes, fr.max_below, fr.solves,
+                        cm_now() - t0);
+            cm_runrec_num(rec, "floor_height", fr.height);
+            cm_runrec_num(rec, "floor_deflection", fr.deflection);
+            cm_runrec_num(rec, "floor_reaction", fr.reaction);
+            cm_runrec_num(rec, "floor_contact_nodes", fr.contact_nodes);
+            cm_runrec_num(rec, "floor_max_below", fr.max_below);
+            rc = fem_write_snapshot(m, err);
+        }
+    } else if (cfg->analysis == FEM_ANALYSIS_STATIC) {
         if ((rc = fem_solve_static(m, err)) == CM_OK)
             rc = fem_write_snapshot(m, err);
     } else { /* from rest, the loads applied at t = 0 */
@@ -179,7 +196,7 @@ static int run(const options *o)
     fem_config cfg = fem_config_default();
     if (o->fem_only) {
         if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = fem_config_read(scene, &cfg, &err)) ||
-            (rc = run_fem_only(o, scene, &cfg, &err)))
+            (rc = run_fem_only(o, scene, &cfg, &rec, &err)))
             goto fail;
         exit_code = 0;
         goto cleanup;
@@ -187,6 +204,11 @@ static int run(const options *o)
     if ((rc = cm_scene_open(o->scene, &scene, &err)) || (rc = cm_run_config_read(scene, &rc_cfg, &err)) || (rc = drive_config_read(scene, &drive, &err)) ||
         (rc = fem_config_read(scene, &cfg, &err)))
         goto fail;
+    if (cfg.floor) {
+        rc = cm_fail(&err, CM_ERR_KEY, "%s: fem.floor is for fem_server --fem-only static runs (the grains are the "
+                     "floor of a coupled run)", o->scene);
+        goto fail;
+    }
     static const char *const sections[] = {"run", "coupling", "wheel", "fem", NULL};
     cm_scene_skip_foreign(scene, sections); /* dem, scm: the terrain's */
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
@@ -234,6 +256,13 @@ static int run(const options *o)
 
     double mesh_mass, mesh_inertia;
     fem_mass_properties(model, &mesh_mass, &mesh_inertia);
+    if (cfg.interface_mass_min > 0) {
+        double added = fem_added_mass(model);
+        cm_log_info("fem: interface nodes raised to %.3g kg (fem.interface_mass_min): %.4g kg added, %.3g %% of the "
+                    "body's %.4g kg", cfg.interface_mass_min, added, 100 * added / mesh_mass, mesh_mass);
+        cm_runrec_num(&rec, "added_mass", added);
+        cm_runrec_num(&rec, "added_mass_fraction", added / mesh_mass);
+    }
     drive_resolve(&drive, mesh_mass, mesh_inertia);
     if (drive.motion != DRIVE_HOLD) {
         char used[160] = "";

@@ -132,6 +132,38 @@ static int build_interface(fem_model *m, cm_error *err)
     return CM_OK;
 }
 
+/* Selective mass scaling (fem.interface_mass_min): each free interface node
+ * lighter than m_min gets the mass m_min (all three components, so gravity
+ * and eq. 42's effective mass see it too). Why: a grain contact of
+ * stiffness k_c on a surface node of mass m is sampled once per exchange
+ * interval H (its force is computed from the node's position at the
+ * exchange and held), so the staggered pair is stable only for
+ *   H < 2 / sqrt((k_c + k_n) / m),
+ * k_n the node's own FE stiffness (the diagonal of K; the FE itself is
+ * sub-cycled). Light surface nodes set that limit; raising their mass to
+ *   m_min = (k_c + k_n) (H / 2)^2 x safety
+ * lifts it for the interval H wanted, changing only the surface's highest
+ * frequencies. The added mass is logged and written to fem_run.json. */
+static void scale_interface_masses(fem_model *m, double m_min)
+{
+    fem_solver *s = m->s;
+    double added = 0.0;
+    for (uint32_t k = 0; k < m->n_if_nodes; k++) {
+        size_t d = 3 * (size_t)m->if_nodes[k];
+        for (size_t a = 0; a < 3; a++) {
+            if (s->fixed[d + a] || s->mass[d + a] >= m_min)
+                continue;
+            if (a == 0)
+                added += m_min - s->mass[d];
+            s->mass[d + a] = m_min;
+            s->inv_mass[d + a] = 1.0 / m_min;
+        }
+    }
+    m->added_mass = added;
+}
+
+double fem_added_mass(const fem_model *m) { return m->added_mass; }
+
 int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
 {
     *out = NULL;
@@ -187,6 +219,8 @@ int fem_create(const fem_config *cfg, fem_model **out, cm_error *err)
     rc = build_interface(m, err);
     if (rc)
         goto fail;
+    if (cfg->interface_mass_min > 0.0 && cfg->integrator != FEM_INTEGRATOR_RIGID)
+        scale_interface_masses(m, cfg->interface_mass_min);
     {   /* body size: bounding-box diagonal, the scale for "blown up" */
         double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
         for (int n = 0; n < m->mesh.n_nodes; n++)
@@ -231,6 +265,7 @@ fail:
     fem_destroy(&m);
     return rc;
 }
+
 
 void fem_destroy(fem_model **pm)
 {
@@ -480,6 +515,7 @@ int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *
             return rc;
     }
     fem_solver *s = m->s;
+    fem_solver_load_changed(s); /* after the prepare: it reads the integrator */
     if (!m->energy_started) {
         m->energy0 = mechanical_energy(m);
         m->energy_started = true;

@@ -27,6 +27,7 @@ struct fem_model {
     long output_advance;    /* advances at the last snapshot fem_output_due wrote (0: none) */
     double max_substep;     /* s, last sub-step used */
     double size;            /* m, bounding-box diagonal of the mesh */
+    double added_mass;      /* kg, added to light interface nodes (cfg.interface_mass_min) */
     /* Energy guard: E = E_kin + E_el - b_pressure.u (pressure is conservative)
      * changes only by the work of the other loads (gravity turning with the
      * rim, the grains): work_in sums (f - b_pressure).du over each interval. */

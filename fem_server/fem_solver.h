@@ -35,6 +35,8 @@ typedef struct fem_solver {
     cholmod_dense *rhs, *sol, *Y, *E; /* solve workspaces (n_free x 1), reused */
     double *u, *v, *a;     /* state per dof (rim frame) */
     double *f;             /* current total load per dof [N]: set by the caller */
+    double *f_applied;     /* the load the acceleration a was computed with (fem_solver_load_changed) */
+    double h_last;         /* s, the last explicit sub-step (0: none since the state was set) */
     double *w, *tmp;       /* work vectors */
     double *ku;            /* K u of the current u, left by the linear explicit step without stiffness damping
                               (its internal forces): the elastic energy reads it instead of a product */
@@ -84,6 +86,13 @@ int fem_solver_use_neo_hookean(fem_solver *s, const fem_mesh *m, cm_error *err);
 /* Sets u, v (NULL: zero, prescribed values on fixed dofs) and the
  * acceleration a = M^-1 (f - K u - C v) from the current s->f. */
 void fem_solver_set_state(fem_solver *s, const double *u, const double *v);
+
+/* After the caller changed s->f between steps: the state takes the new
+ * load as the force at the current time, a += M^-1 (f - f_applied) and,
+ * explicit, the last half-kick v += h_last/2 M^-1 (f - f_applied), so that
+ * the next step applies the load from its start (a load held over an
+ * interval acts on that interval, not one sub-step later). */
+void fem_solver_load_changed(fem_solver *s);
 
 /* Prepares the integrator for sub-step h (Newmark: factorizes K_eff when h
  * changed). No allocation happens in fem_solver_step afterwards. */

@@ -83,6 +83,7 @@ enum {
     IPC_INFO_DEM_WORK,      /* J, interface work seen by the DEM, accumulated */
     IPC_INFO_BED_HEIGHT,    /* m, height of the undisturbed bed surface (0 if none) */
     IPC_INFO_BED_TOP,       /* m, highest grain top (z + r) before the wheel arrives (0 if none) */
+    IPC_INFO_CONTACT_ENERGY, /* J, elastic energy stored in the grain-surface contacts (0 if not known) */
     /* FEM -> DEM: wheel state, world frame. */
     IPC_INFO_CENTER_X = 16, IPC_INFO_CENTER_Y, IPC_INFO_CENTER_Z, /* m */
     IPC_INFO_VEL_X, IPC_INFO_VEL_Y, IPC_INFO_VEL_Z,              /* m/s */

@@ -1009,6 +1009,124 @@ static int rim_reaction_balances_loads(void)
     return 0;
 }
 
+/* A load held over an interval acts from the interval's start (central
+ * differences: m (u+ - 2u + u-) / h^2 = f(t) - K u). From rest, one sub-step
+ * h under a force P on one node moves it by h^2 P / (2 m) (u = a t^2 / 2;
+ * the other nodes do not move yet). The old step used the acceleration of
+ * the previous load for the interval's first half-kick: the node stayed at
+ * 0, the force acted one sub-step late. */
+static int step_load_from_interval_start(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.box_cells[1] = c.box_cells[2] = 2;
+    c.pressure = 0.0;
+    c.gravity[2] = 0.0;
+    fem_model *m;
+    cm_error err = {0};
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    fem_stability st;
+    ENSURE(fem_get_stability(m, &st) == CM_OK);
+    double h = 0.5 * st.dt_limit;
+    fem_destroy(&m);
+    c.dt = h;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE(fem_solve_static(m, &err) == CM_OK);
+    uint32_t nn;
+    fem_interface_count(m, &nn, NULL);
+    double *f = calloc(3 * nn, sizeof *f), *mass = calloc(nn, sizeof *mass), *x0 = calloc(3 * nn, sizeof *x0),
+           *x1 = calloc(3 * nn, sizeof *x1);
+    ENSURE(f && mass && x0 && x1);
+    fem_interface_masses(m, mass);
+    uint32_t k = 0; /* the heaviest free interface node: away from the clamped rim */
+    for (uint32_t i = 1; i < nn; i++)
+        k = mass[i] > mass[k] ? i : k;
+    ENSURE(mass[k] > 0.0);
+    const double P = 3.0;
+    f[3 * k + 2] = P;
+    fem_interface_state(m, x0, NULL);
+    ENSURE(fem_advance(m, f, h, &err) == CM_OK);
+    fem_interface_state(m, x1, NULL);
+    double expect = h * h * P / (2.0 * mass[k]), got = x1[3 * k + 2] - x0[3 * k + 2], other = 0.0;
+    for (uint32_t i = 0; i < 3 * nn; i++)
+        if (i != 3 * k + 2)
+            other = fmax(other, fabs(x1[i] - x0[i]));
+    printf("  one sub-step h = %.3g s under %.1f N on a %.4g kg node: moved %.6g m, h^2 P / (2 m) = %.6g m; "
+           "largest other motion %.3g m\n", h, P, mass[k], got, expect, other);
+    ENSURE_REL(got, expect, 1e-9);
+    ENSURE(other < 1e-12 * expect);
+    free(f);
+    free(mass);
+    free(x0);
+    free(x1);
+    fem_destroy(&m);
+    return 0;
+}
+
+/* The staggered exchange as a two-mass oscillator: one interface node on a
+ * contact spring k whose force is computed from the position the FEM last
+ * sent and held over the next interval, as dem_server does. The whole
+ * system (the body's elastic and kinetic energy + the spring's) is then
+ * integrated by central differences and conserves its energy to O((w h)^2)
+ * below the critical interval 2 / sqrt(w_fe^2 + k / m). A force applied one
+ * sub-step late is a negative damper -k h on the node: on the old step the
+ * FEM's energy guard stopped this case after 10 intervals. Measured with the
+ * fix: within [0.990, 1.013] of the start. */
+static int staggered_contact_spring(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.box_cells[1] = c.box_cells[2] = 2;
+    c.pressure = 0.0;
+    c.gravity[2] = 0.0;
+    fem_model *m;
+    cm_error err = {0};
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    fem_stability st;
+    ENSURE(fem_get_stability(m, &st) == CM_OK);
+    double h = 0.25 * st.dt_limit;
+    fem_destroy(&m);
+    c.dt = h;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE(fem_solve_static(m, &err) == CM_OK);
+    uint32_t nn;
+    fem_interface_count(m, &nn, NULL);
+    double *f = calloc(3 * nn, sizeof *f), *mass = calloc(nn, sizeof *mass), *x = calloc(3 * nn, sizeof *x);
+    ENSURE(f && mass && x);
+    fem_interface_masses(m, mass);
+    uint32_t k = 0;
+    for (uint32_t i = 1; i < nn; i++)
+        k = mass[i] > mass[k] ? i : k;
+    /* a stiff contact: k / m = 0.05 / h^2, pre-stretched by d along z */
+    const double kc = 0.05 * mass[k] / (h * h), d = 1e-4;
+    fem_interface_state(m, x, NULL);
+    const double anchor = x[3 * k + 2] + d;
+    double e0 = 0.5 * kc * d * d, emin = e0, emax = e0;
+    for (int n = 0; n < 4000; n++) {
+        double gap = x[3 * k + 2] - anchor;
+        f[3 * k + 2] = -kc * gap;
+        ENSURE_MSG(fem_advance(m, f, h, &err) == CM_OK, "%s", err.msg);
+        fem_interface_state(m, x, NULL);
+        fem_energy en;
+        fem_get_energy(m, &en);
+        double g = x[3 * k + 2] - anchor, e = en.elastic + en.kinetic + 0.5 * kc * g * g;
+        emin = fmin(emin, e);
+        emax = fmax(emax, e);
+    }
+    printf("  node %.4g kg on k = %.4g N/m (k/m = 0.05/h^2), h = %.3g s = 0.25 of the FE limit: total energy within "
+           "[%.4f, %.4f] of its start over 4000 intervals\n", mass[k], kc, h, emin / e0, emax / e0);
+    ENSURE(emax < 1.05 * e0 && emin > 0.95 * e0);
+    free(f);
+    free(mass);
+    free(x);
+    fem_destroy(&m);
+    return 0;
+}
+
 /* fem_advance over k dt equals k advances of dt (same sub-step), the
  * sub-step count is ceil(interval/dt), and time adds up. */
 static int subcycling(void)
@@ -1050,6 +1168,205 @@ static int subcycling(void)
 }
 
 /* ---- Scene section ------------------------------------------------------------ */
+
+/* fem.interface_mass_min: every free interface node lighter than m_min
+ * gets m_min in all three components (1/m too), no other node changes, the
+ * added mass is the sum of the differences, the explicit limit does not
+ * shrink, the DEM is told the new masses; a negative value is refused
+ * naming the key, and the key reads from a scene. */
+static int interface_mass_scaling(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.box_cells[1] = c.box_cells[2] = 2;
+    fem_model *a, *b;
+    cm_error err = {0};
+    ENSURE(fem_create(&c, &a, &err) == CM_OK);
+    uint32_t nn;
+    fem_interface_count(a, &nn, NULL);
+    double *ma = calloc(nn, sizeof *ma), *mb = calloc(nn, sizeof *mb);
+    ENSURE(ma && mb);
+    fem_interface_masses(a, ma);
+    double lo = INFINITY, hi = 0.0;
+    for (uint32_t k = 0; k < nn; k++)
+        if (ma[k] > 0.0)
+            lo = fmin(lo, ma[k]), hi = fmax(hi, ma[k]);
+    ENSURE(lo < hi);
+    c.interface_mass_min = 0.5 * (lo + hi);
+    ENSURE(fem_create(&c, &b, &err) == CM_OK);
+    fem_interface_masses(b, mb);
+    double added = 0.0;
+    for (uint32_t k = 0; k < nn; k++) {
+        if (ma[k] == 0.0) { /* on the clamped rim: stays fixed */
+            ENSURE(mb[k] == 0.0);
+            continue;
+        }
+        ENSURE(mb[k] == fmax(ma[k], c.interface_mass_min));
+        added += mb[k] - ma[k];
+        size_t d = 3 * (size_t)b->if_nodes[k];
+        for (int q = 0; q < 3; q++)
+            ENSURE(b->s->fixed[d + q] || (b->s->mass[d + q] == mb[k] && b->s->inv_mass[d + q] == 1.0 / mb[k]));
+    }
+    double mass_a, mass_b, ia, ib;
+    fem_mass_properties(a, &mass_a, &ia);
+    fem_mass_properties(b, &mass_b, &ib);
+    printf("  interface nodes %.4g ... %.4g kg raised to %.4g kg: %.4g kg added (%.3g %% of %.4g kg); explicit limit "
+           "%.4g -> %.4g s\n", lo, hi, c.interface_mass_min, fem_added_mass(b), 100 * fem_added_mass(b) / mass_a,
+           mass_a, a->stab.dt_limit, b->stab.dt_limit);
+    ENSURE(added > 0.0 && fem_added_mass(a) == 0.0);
+    ENSURE_REL(fem_added_mass(b), added, 1e-12);
+    ENSURE_REL(mass_b - mass_a, added, 1e-9);
+    ENSURE(b->stab.dt_limit >= a->stab.dt_limit * (1.0 - 1e-6));
+    for (int d = 0; d < a->s->n_dof; d++) /* nodes off the interface keep their masses */
+        ENSURE(a->s->mass[d] == b->s->mass[d] || b->s->mass[d] == c.interface_mass_min);
+    free(ma);
+    free(mb);
+    fem_destroy(&a);
+    fem_destroy(&b);
+
+    static const char *const sections[] = {"fem", NULL};
+    const char *good = "fem = {\n  mesh = { type = \"box\"; size = [0.2, 0.1, 0.1]; cells = [4, 2, 2]; };\n"
+                       "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n"
+                       "  integrator = \"explicit\"; dt = 1e-5; interface_mass_min = 2.5e-3; };\n";
+    cm_scene *s;
+    ENSURE(cm_scene_open_string(good, "good.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE_MSG(fem_config_read(s, &c, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s", err.msg);
+    ENSURE(c.interface_mass_min == 2.5e-3);
+    cm_scene_close(&s);
+    const char *bad = "fem = {\n  mesh = { type = \"box\"; size = [0.2, 0.1, 0.1]; cells = [4, 2, 2]; };\n"
+                      "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n"
+                      "  integrator = \"explicit\"; dt = 1e-5; interface_mass_min = -1.0; };\n";
+    ENSURE(cm_scene_open_string(bad, "bad.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE(fem_config_read(s, &c, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "fem.interface_mass_min"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
+/* fem.floor, the rigid frictionless floor (kinematic), on a closed form: a
+ * 20 mm cube on rollers (xmin: x, ymin: y), its top held (zmax: z = 0),
+ * the floor pressed d = 0.2 mm up into its bottom: uniaxial stress E d / H,
+ * a reaction of E A d / H = 40 N exactly (linear tetrahedra are exact under
+ * uniform strain), every bottom node held, none below the plane; asked for
+ * a load of 40 N instead, the floor is found at d. */
+static int floor_block_closed_form(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = c.box_size[1] = c.box_size[2] = 0.02;
+    c.box_cells[0] = c.box_cells[1] = c.box_cells[2] = 2;
+    c.E = 1e7;
+    c.nu = 0.3;
+    c.pressure = 0.0;
+    c.gravity[2] = 0.0;
+    c.integrator = FEM_INTEGRATOR_RIGID; /* a static case: no stability analysis */
+    c.n_supports = 3;
+    c.supports[0] = (fem_support){.set = FEM_SET_XMIN, .fix = {true, false, false}};
+    c.supports[1] = (fem_support){.set = FEM_SET_YMIN, .fix = {false, true, false}};
+    c.supports[2] = (fem_support){.set = FEM_SET_ZMAX, .fix = {false, false, true}};
+    c.floor = true;
+    c.floor_set = FEM_SET_ZMIN;
+    const double d = 2e-4, expect = 1e7 * 0.02 * 0.02 * d / 0.02;
+    c.floor_height = d;
+    fem_model *m;
+    cm_error err = {0};
+    fem_floor_result r;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    printf("  cube pressed %.1f mm: reaction %.9g N (E A d / H = %.9g N) on %d nodes, deepest %.2g m below, %d "
+           "solves\n", 1e3 * d, r.reaction, expect, r.contact_nodes, r.max_below, r.solves);
+    ENSURE_REL(r.reaction, expect, 1e-9);
+    ENSURE(r.contact_nodes == 9 && r.max_below <= 1e-15);
+    ENSURE_NEAR(r.deflection, d, 1e-15);
+    fem_destroy(&m);
+    c.floor_height = 0.0;
+    c.floor_load = expect;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    printf("  asked for %.6g N: floor at %.9g m (d = %.9g m), reaction %.9g N, %d solves\n", expect, r.height, d,
+           r.reaction, r.solves);
+    ENSURE_REL(r.reaction, expect, 1e-6);
+    ENSURE_REL(r.height, d, 1e-6);
+    fem_destroy(&m);
+    return 0;
+}
+
+/* The inflated small tire pressed onto the floor until it carries 400 N
+ * (no gravity): the floor's reaction is the load, the rim holds the tire
+ * with the opposite force (the balance of the whole body), no node of the
+ * tread is below the plane, and only a patch touches (the active set let
+ * go of the nodes the plane would pull). */
+static int floor_tire_balance(void)
+{
+    fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
+    c.gravity[2] = 0.0;
+    c.floor = true;
+    c.floor_set = FEM_SET_CONTACT;
+    c.floor_load = 400.0;
+    fem_model *m;
+    cm_error err = {0};
+    fem_floor_result r;
+    ENSURE(fem_create(&c, &m, &err) == CM_OK);
+    ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+    double F[3], T[3];
+    fem_rim_reaction(m, F, T);
+    uint32_t nn;
+    fem_interface_count(m, &nn, NULL);
+    printf("  small tire, 0.14 MPa, 400 N: floor at %.6g m, deflection %.4f mm, %d nodes touch (of %u tread "
+           "nodes), deepest %.2g m below; rim force %.6g %.6g %.6g N; %d solves\n",
+           r.height, 1e3 * r.deflection, r.contact_nodes, nn, r.max_below, F[0], F[1], F[2], r.solves);
+    ENSURE_REL(r.reaction, 400.0, 1e-6);
+    ENSURE_NEAR(F[2], -r.reaction, 1e-6 * 400.0);
+    ENSURE_NEAR(F[0], 0.0, 1e-3 * 400.0);
+    ENSURE(r.max_below <= 1e-12 && r.deflection > 0.0);
+    ENSURE(r.contact_nodes >= 3 && (uint32_t)r.contact_nodes < nn / 4);
+    fem_destroy(&m);
+    return 0;
+}
+
+/* fem.floor's keys: read from a scene, exactly one of height and load,
+ * the set named, a misspelt key refused by the strict check. */
+static int floor_keys_checked(void)
+{
+    static const char *const sections[] = {"fem", NULL};
+    const char *head = "fem = {\n  mesh = { type = \"box\"; size = [0.02, 0.02, 0.02]; cells = [2, 2, 2]; };\n"
+                       "  material = { E = 1.0e7; nu = 0.3; rho = 1000.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n";
+    static const struct { const char *floor; int ok; const char *msg; } cases[] = {
+        {"floor = { set = \"zmin\"; height = 2e-4; };", 1, NULL},
+        {"floor = { load = 400.0; };", 1, NULL},
+        {"floor = { set = \"zmin\"; height = 2e-4; load = 40.0; };", 0, "exactly one of height"},
+        {"floor = { set = \"zmin\"; };", 0, "exactly one of height"},
+        {"floor = { set = \"bottom\"; height = 0.0; };", 0, "fem.floor.set"},
+        {"floor = { load = -1.0; };", 0, "fem.floor.load"},
+        {"floor = { height = 0.0; heigth = 1.0; };", -1, "heigth"},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        char text[1024];
+        snprintf(text, sizeof text, "%s  %s\n};\n", head, cases[k].floor);
+        cm_scene *s;
+        cm_error err = {0};
+        ENSURE(cm_scene_open_string(text, "floor.cfg", &s, &err) == CM_OK);
+        fem_config c = fem_config_default();
+        int rc = fem_config_read(s, &c, &err);
+        if (rc == CM_OK && cases[k].ok == -1)
+            rc = cm_scene_check_unknown(s, sections, &err);
+        else if (rc == CM_OK)
+            ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s: %s", cases[k].floor, err.msg);
+        ENSURE_MSG(cases[k].ok == 1 ? rc == CM_OK : rc != CM_OK, "%s", cases[k].floor);
+        if (cases[k].msg)
+            ENSURE_MSG(strstr(err.msg, cases[k].msg), "%s: %s", cases[k].floor, err.msg);
+        if (cases[k].ok == 1)
+            ENSURE(c.floor && (k == 0 ? c.floor_set == FEM_SET_ZMIN && c.floor_height == 2e-4 && c.floor_load == 0
+                                      : c.floor_set == FEM_SET_CONTACT && c.floor_load == 400.0));
+        cm_scene_close(&s);
+    }
+    return 0;
+}
 
 static int config_from_scene(void)
 {
@@ -1425,7 +1742,13 @@ int main(int argc, char **argv)
         {"interface_and_wheel", interface_and_wheel},
         {"rim_reaction_balances_loads", rim_reaction_balances_loads},
         {"subcycling", subcycling},
+        {"step_load_from_interval_start", step_load_from_interval_start},
+        {"staggered_contact_spring", staggered_contact_spring},
         {"config_from_scene", config_from_scene},
+        {"interface_mass_scaling", interface_mass_scaling},
+        {"floor_block_closed_form", floor_block_closed_form},
+        {"floor_tire_balance", floor_tire_balance},
+        {"floor_keys_checked", floor_keys_checked},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},
         {"snapshot_world_frame", snapshot_world_frame},

@@ -1,0 +1,103 @@
+/* The tire's deflection on a rigid floor, converged under refinement
+ * (issue 16 item 1): the built-in tire inflated to 0.14 MPa and pressed
+ * onto the kinematic floor (fem.floor) until it carries 400 N, no gravity,
+ * for each element:resolution given; beside it the cost of an explicit
+ * step and the stable step (2/omega_max), so that the deflection's error is
+ * set against what a run pays for it.
+ *
+ *   bench_deflection OUT.csv tet4:0.5 tet4:1.0 tet10:0.5 ...
+ *
+ * CSV columns: element, resolution, nodes, tets, deflection_mm, contact_nodes,
+ * floor_s (the static floor solve), step_ms (median of 5 blocks of explicit
+ * steps at 0.9 of the limit), dt_limit_s. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fem.h"
+#include "fem_model.h"
+#include "log.h"
+#include "timer.h"
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 3) {
+        fprintf(stderr, "usage: %s OUT.csv ELEMENT:RESOLUTION ...\n", argv[0]);
+        return 2;
+    }
+    cm_log_set_quiet(1);
+    FILE *fp = fopen(argv[1], "w");
+    if (!fp) {
+        perror(argv[1]);
+        return 1;
+    }
+    fprintf(fp, "element,resolution,nodes,tets,deflection_mm,contact_nodes,floor_s,step_ms,dt_limit_s\n");
+    for (int k = 2; k < argc; k++) {
+        char el[16];
+        double res;
+        if (sscanf(argv[k], "%15[^:]:%lf", el, &res) != 2 || (strcmp(el, "tet4") && strcmp(el, "tet10"))) {
+            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION expected (tet4 or tet10)\n", argv[k]);
+            return 2;
+        }
+        fem_config c = fem_config_default();
+        c.tire.resolution = res;
+        c.element = strcmp(el, "tet10") == 0 ? FEM_ELEMENT_TET10 : FEM_ELEMENT_TET4;
+        c.integrator = FEM_INTEGRATOR_EXPLICIT;
+        c.dt = 1e-9; /* set to 0.9 of the limit below */
+        c.gravity[2] = 0.0;
+        c.check_every = 0;
+        c.floor = true;
+        c.floor_set = FEM_SET_CONTACT;
+        c.floor_load = 400.0;
+        cm_error err = {0};
+        fem_model *m;
+        if (fem_create(&c, &m, &err)) {
+            fprintf(stderr, "bench_deflection: %s\n", err.msg);
+            return 1;
+        }
+        fem_stability st;
+        fem_get_stability(m, &st);
+        m->cfg.dt = 0.9 * st.dt_limit;
+        /* explicit steps from the inflated static state */
+        double blocks[5];
+        if (fem_solve_static(m, &err)) {
+            fprintf(stderr, "bench_deflection: %s\n", err.msg);
+            return 1;
+        }
+        for (int b = 0; b < 5; b++) {
+            double t0 = cm_now();
+            for (int i = 0; i < 40; i++)
+                if (fem_advance(m, NULL, m->cfg.dt, &err)) {
+                    fprintf(stderr, "bench_deflection: %s\n", err.msg);
+                    return 1;
+                }
+            blocks[b] = (cm_now() - t0) / 40;
+        }
+        qsort(blocks, 5, sizeof *blocks, cmp_double);
+        fem_floor_result r;
+        double t0 = cm_now();
+        if (fem_floor_static(m, &r, &err)) {
+            fprintf(stderr, "bench_deflection: %s\n", err.msg);
+            return 1;
+        }
+        double t_floor = cm_now() - t0;
+        int nn, nt;
+        fem_mesh_size(m, &nn, &nt);
+        fprintf(fp, "%s,%g,%d,%d,%.6f,%d,%.3f,%.4f,%.4g\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes,
+                t_floor, 1e3 * blocks[2], st.dt_limit);
+        fflush(fp);
+        printf("%s res %g: %d nodes, %d tets: deflection %.4f mm (%d nodes touch, %d solves, %.1f s); step %.3f ms, "
+               "limit %.3g s\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes, r.solves, t_floor,
+               1e3 * blocks[2], st.dt_limit);
+        fflush(stdout);
+        fem_destroy(&m);
+    }
+    fclose(fp);
+    return 0;
+}

@@ -52,9 +52,12 @@
  *   (N, up on the lid), normal_stress (Pa, normal_force / box area),
  *   shear_force (N, the grains' resistance: -x force on the upper half and
  *   the lid), shear_stress (Pa, / box area), lid_shear_force (N, the lid's
- *   part of it), upper_wall_fz (N, vertical force on the upper walls: wall
- *   friction carrying load past the shear plane), lower_fx (N, x force on the
- *   lower walls), contacts (all grain-mesh contacts).
+ *   part of it), upper_wall_fz (N, up on the upper walls: as the grains
+ *   dilate they rub up along the fixed upper walls, which push them down by
+ *   as much, loading the shear plane beyond the lid; the normal force on the
+ *   plane is normal_force + upper_wall_fz + the upper grains' weight,
+ *   bench/calibrate/soiltests.py), lower_fx (N, x force on the lower walls),
+ *   contacts (all grain-mesh contacts).
  * The box area is the nominal L * W throughout (the ratio tau / sigma_n does
  * not depend on it). bench/calibrate/run reads the file; nothing reads logs. */
 #include <math.h>

@@ -103,11 +103,12 @@ def heap_angle(x, r, floor_z=0.0, centre=None, ring=None):
     radii r (m) on a floor at floor_z. The heap's surface is the highest
     grain top (z + r) in rings of width `ring` (default 2 r_max) around
     `centre` (default the grains' mean x, y); the slope is the least-squares
-    line through the rings of the flank: the rings (not the central one)
-    whose top lies between two grain diameters above the floor (below, the
-    toe of single grains is not the heap) and 85 % of the heap's height
-    (above, the rounded apex or the plateau a collapsed column keeps). A
-    flat layer (fewer than two such rings) has angle 0.
+    line through the rings of the flank: from the first ring (not the
+    central one) whose top is below 85 % of the heap's height (above, the
+    rounded apex or the plateau a collapsed column keeps) outwards, as long
+    as the tops stay at least two grain diameters above the floor (below,
+    the toe of single grains is not the heap). A flat layer (fewer than two
+    such rings) has angle 0.
 
     Returns (angle_deg, dict with the ring radii and tops used)."""
     x = np.asarray(x, dtype=float)
@@ -127,7 +128,13 @@ def heap_angle(x, r, floor_z=0.0, centre=None, ring=None):
         tt.append(float(np.max(top[m])))
     rr, tt = np.array(rr), np.array(tt)
     d = 2.0 * float(np.mean(r))
-    used = (tt >= 2.0 * d) & (tt <= 0.85 * float(np.max(tt))) & (np.arange(len(rr)) >= 1)
+    used = np.zeros(len(rr), bool)
+    below = np.nonzero((tt <= 0.85 * float(np.max(tt))) & (np.arange(len(rr)) >= 1))[0]
+    if len(below):  # contiguous, from there out to the toe: a stray grain further out is not the flank
+        for k in range(below[0], len(rr)):
+            if tt[k] < 2.0 * d:
+                break
+            used[k] = True
     if np.count_nonzero(used) < 2:
         return 0.0, {"ring_r": rr, "ring_top": tt, "used": used}
     slope = np.polyfit(rr[used], tt[used], 1)[0]

@@ -18,6 +18,7 @@ keys_checked: a misspelt fem.shear key, a lid wider than the box and a lid
 usage: test_shear_rig.py BUILD_DIR CASE"""
 import csv
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -46,7 +47,9 @@ def run_frozen(build):
         sys.stdout.write(open(os.path.join(out, "run.log")).read())
     ensure(rc == 0, "the run failed (exit %d), log in %s/run.log" % (rc, out))
     with open(os.path.join(out, "shear_box.csv")) as f:
-        return [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+        rows = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(f)]
+    shutil.rmtree(out)  # kept only when the run failed
+    return rows
 
 
 def frozen_block_friction(build):

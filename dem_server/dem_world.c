@@ -35,7 +35,7 @@ dem_world_def dem_world_def_default(void)
     d.dt_safety_rayleigh = 0.3;
     d.dt_safety_hertz = 0.1;
     d.allow_unstable = false;
-    d.reorder_every = 20;
+    d.reorder_every = 1;
     return d;
 }
 
@@ -193,6 +193,8 @@ void dem_world_destroy(dem_world **wp)
     free(w->plan.con);
     free(w->hist_val[0]);
     free(w->hist_val[1]);
+    free(w->hist_ori[0]);
+    free(w->hist_ori[1]);
     dem_hash_free(&w->hist[0]);
     dem_hash_free(&w->hist[1]);
     if (w->tb)

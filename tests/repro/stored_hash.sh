@@ -15,8 +15,8 @@
 # change was meant to leave results alone.
 set -uo pipefail
 src=$1 build=$2 mode=${3:-check}
-DEM_WANT=0b0ca3b6d1cea698
-FEM_WANT=39420b20fbb7c887
+DEM_WANT=3ae7970932f9adb9
+FEM_WANT=d41b18330bbde556
 out=$(mktemp -d /tmp/demfem_repro_XXXXXX)
 trap 'rm -rf "$out"' EXIT
 DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_small.cfg" --out "$out/r" \

@@ -52,8 +52,10 @@ static int grow_pairs(dem_world *w, int need)
  * are: the same block of grains is ordered the same in any world. */
 static inline int axis_cell(const dem_grid_dims *gd, int k, double v)
 {
-    long c = (long)floor(v / gd->h) - gd->base[k];
-    return c < 0 ? 0 : (c >= gd->n[k] ? gd->n[k] - 1 : (int)c);
+    /* in doubles (integers, exact below 2^53): a grain flung far away by an
+     * unstable step still gets a cell, the nearest one */
+    double c = floor(v / gd->h) - gd->base[k];
+    return c >= 0.0 ? (c < gd->n[k] ? (int)c : gd->n[k] - 1) : 0;
 }
 
 static int cell_of(const dem_grid_dims *gd, double x, double y, double z)
@@ -70,8 +72,8 @@ void dem_grid_dims_of(const double lo[3], const double hi[3], double h, long n_g
     for (;;) {
         ncell = 1;
         for (int k = 0; k < 3; k++) {
-            gd->base[k] = (long)floor(lo[k] / h);
-            gd->n[k] = (int)fmin(1e6, (double)((long)floor(hi[k] / h) - gd->base[k] + 1));
+            gd->base[k] = floor(lo[k] / h);
+            gd->n[k] = (int)fmin(1e6, floor(hi[k] / h) - gd->base[k] + 1.0);
             ncell *= gd->n[k];
         }
         if (ncell <= 4L * n_grains + 64)

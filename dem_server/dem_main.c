@@ -129,11 +129,24 @@ typedef struct output_ctx {
     dem_window *window; /* saved in checkpoints (NULL = none) */
     const char *resume_path;  /* checkpoint to resume from, NULL for a fresh run */
     long resume_exchange;
+    /* distributed run: frames of the whole world gathered into `view` (rank 0) */
+    int distributed, frames;  /* frames: rank 0 writes an output (the same on every rank) */
+    dem_world *view;
 } output_ctx;
 
 /* Writes grain frames and series lines at the configured step intervals. */
 static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
 {
+#ifdef DEMFEM_MPI
+    if (c->distributed) { /* every rank: the gather is collective */
+        const long step = dem_world_steps(w);
+        if (!c->frames || step - c->last_frame < c->cfg->output_every)
+            return CM_OK;
+        c->last_frame = step;
+        int rc = dem_mpi_gather(w, c->view, err);
+        return rc == CM_OK && g_rank == 0 ? dem_output_frame(c->out, c->view, err) : rc;
+    }
+#endif
     if (!c->out)
         return CM_OK;
     /* Called every exchange: only the step count, not dem_world_stats (a sum
@@ -429,11 +442,14 @@ static int run(const options *o)
         if (g_ranks > 1) {
             if ((rc = dem_mpi_attach(w, MPI_COMM_WORLD, &err)))
                 goto fail;
+            octx.distributed = 1;
+            octx.frames = octx.out != NULL;
+            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
+                goto fail;
             if (g_rank == 0 && steps > 0 && octx.out)
-                cm_log_warn("%d ranks: grain frames and series are written for the initial state only (gathering "
-                            "them during the run is phase 2 of issue 17); the final state hash is the whole world's",
-                            g_ranks);
-            octx.out = NULL; /* rank 0 holds only its slab from the first rebuild on */
+                cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
+                            "state only (its contact counts over ranks are phase 2 of issue 17)", g_ranks);
         }
 #endif
         for (long k = 0; k < steps && !g_sig->stop; k++) {
@@ -518,6 +534,7 @@ cleanup:
             cm_log_warn("%s", rerr.msg);
     }
     dem_output_close(&octx.out);
+    dem_world_destroy(&octx.view);
     dem_window_free(&window);
     dem_world_destroy(&w);
     cm_scene_close(&scene);

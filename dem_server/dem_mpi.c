@@ -404,7 +404,16 @@ static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
     return CM_OK;
 }
 
-static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree};
+static void ctx_free(dist_ctx *d);
+
+static void dist_release(dem_world *w)
+{
+    ctx_free(w->dist_ctx);
+    w->dist = NULL;
+    w->dist_ctx = NULL;
+}
+
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release};
 
 static void ctx_free(dist_ctx *d)
 {
@@ -483,9 +492,7 @@ void dem_mpi_detach(dem_world *w)
 {
     if (!w->dist)
         return;
-    ctx_free(w->dist_ctx);
-    w->dist = NULL;
-    w->dist_ctx = NULL;
+    dist_release(w);
     w->need_rebuild = 1;
 }
 
@@ -568,4 +575,71 @@ int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err)
     MPI_Bcast(&h, 1, MPI_UINT64_T, 0, d->comm);
     *hash = h;
     return CM_OK;
+}
+
+static const int *g_sort_tags; /* qsort's comparison of slots by tag (rank 0, one gather at a time) */
+
+static int slot_by_tag(const void *a, const void *b)
+{
+    int x = g_sort_tags[*(const int *)a], y = g_sort_tags[*(const int *)b];
+    return (x > y) - (x < y);
+}
+
+int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_gather: the world is not distributed");
+    const size_t rs = rec_size(w);
+    const int n = w->own_hi - w->own_lo;
+    int rc, ok = 1, total = 0;
+    int counts[2] = {n, w->contacts_gw}, sums[2] = {0, 0};
+    if ((rc = MPI_Reduce(counts, sums, 2, MPI_INT, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "reduce of the grain counts", w->step);
+    total = sums[0];
+    if (d->rank == 0)
+        ok = view && total <= view->g.cap && !grow(&d->rbuf, &d->rbuf_cap, (size_t)total * rs);
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs))
+        ok = 0;
+    int okall = 0;
+    MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
+    if (!okall)
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to gather %d grains on rank 0 (max_grains %d)", w->step,
+                       total, view ? view->g.cap : 0);
+    for (int k = 0; k < n; k++)
+        pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
+    int cnt = n * (int)rs;
+    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grain counts", w->step);
+    if (d->rank == 0) {
+        d->rdispl[0] = 0;
+        for (int r = 1; r < d->size; r++)
+            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
+    }
+    if ((rc = MPI_Gatherv(d->sbuf, cnt, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
+        MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grains", w->step);
+    if (d->rank != 0)
+        return CM_OK;
+    /* rank order is the global order: the slabs follow each other along x */
+    view->n_walls = w->n_walls;
+    memcpy(view->walls, w->walls, sizeof w->walls);
+    view->wall_stride = w->wall_stride;
+    view->g.n = total;
+    view->n_frozen = 0;
+    for (int k = 0; k < total; k++) {
+        unpack_grain(view, k, d->rbuf + (size_t)k * rs);
+        view->n_frozen += view->g.frozen[k];
+        d->order[k] = k;
+    }
+    g_sort_tags = view->g.tag;
+    qsort(d->order, (size_t)total, sizeof *d->order, slot_by_tag);
+    for (int id = 0; id < total; id++)
+        view->g.id[d->order[id]] = id, view->g.slot_of[id] = d->order[id];
+    view->time = w->time, view->step = w->step;
+    view->r_min = w->r_min, view->r_max = w->r_max, view->skin = w->skin;
+    view->contacts_gw = sums[1];
+    view->prepared = 1;
+    view->def.reorder_every = 0; /* keep the gathered order */
+    return dem_neighbour_rebuild(view, err);
 }

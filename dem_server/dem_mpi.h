@@ -32,8 +32,8 @@
  * until then, as a world of its own would: attaching changes no bits).
  * Needs reorder_every = 1. */
 int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err);
-/* Frees the distribution (the world keeps this rank's owned grains and is
- * no longer stepped in step with the others). */
+/* Frees the distribution (the world keeps this rank's grains and is no
+ * longer stepped in step with the others); dem_world_destroy does it too. */
 void dem_mpi_detach(dem_world *w);
 
 typedef struct dem_mpi_stats {
@@ -51,6 +51,14 @@ void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s);
  * in tag order: the value one process computes for the same state), on
  * every rank (collective). */
 int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err);
+
+/* The whole world on rank 0, for its outputs (collective): every rank's
+ * owned grains into `view` (rank 0's; a world made with the same definition
+ * and materials, NULL elsewhere) in the global order, ids in tag order as one
+ * process numbers them, walls, clock and wall-contact count copied, and a
+ * neighbour list of its own (no re-sort), so that dem_output_frame writes
+ * what one process writes for the same state. */
+int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err);
 
 /* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
  * each at least one column, split so that the grain counts count[c] are as

@@ -162,6 +162,8 @@ void dem_world_destroy(dem_world **wp)
     dem_world *w = *wp;
     if (!w)
         return;
+    if (w->dist && w->dist->release)
+        w->dist->release(w);
     dem_grains *g = &w->g;
     free(g->block); /* x .. z0 */
     free(g->q);

@@ -93,7 +93,7 @@ typedef struct dem_thread_buf {
  * (cx n1 + cy) n2 + cz, x slowest. */
 typedef struct dem_grid_dims {
     double h;
-    long base[3];
+    double base[3]; /* integers: the first cell's index on the lattice */
     int n[3];
 } dem_grid_dims;
 
@@ -107,6 +107,8 @@ typedef struct dem_dist_ops {
     int (*halo)(dem_world *w, cm_error *err);
     /* *maxd2 and *bad (non-zero: a non-finite grain somewhere) over every rank */
     int (*agree)(dem_world *w, double *maxd2, int *bad, cm_error *err);
+    /* frees the distribution's own data (dem_world_destroy calls it) */
+    void (*release)(dem_world *w);
 } dem_dist_ops;
 
 struct dem_world {

@@ -21,7 +21,7 @@ run() { # NAME [mpirun -np N ...]: the final hash into $work/NAME.hash
 run one
 h1=$(cat "$work/one.hash")
 mpi=("$mpiexec" --allow-run-as-root --oversubscribe --bind-to none --mca mpi_yield_when_idle 1
-     --mca mca_base_component_disable_dlclose 1 -np)
+     --mca mca_base_component_disable_dlclose 1 --mca btl_vader_single_copy_mechanism none -np)
 for n in 2 3; do
   run ranks$n "${mpi[@]}" $n
   h=$(cat "$work/ranks$n.hash")

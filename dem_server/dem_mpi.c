@@ -357,14 +357,14 @@ enum { HALO_REC = 9 };
 static void pack_state(const dem_grains *g, int lo, int n, double *b)
 {
     const double *a[HALO_REC] = {g->x, g->y, g->z, g->vx, g->vy, g->vz, g->wx, g->wy, g->wz};
-    for (int k = 0; k < HALO_REC; k++)
+    for (int k = 0; k < HALO_REC && n > 0; k++) /* no buffer yet before the first rebuild */
         memcpy(b + (size_t)k * n, a[k] + lo, (size_t)n * sizeof *b);
 }
 
 static void unpack_state(dem_grains *g, int lo, int n, const double *b)
 {
     double *a[HALO_REC] = {g->x, g->y, g->z, g->vx, g->vy, g->vz, g->wx, g->wy, g->wz};
-    for (int k = 0; k < HALO_REC; k++)
+    for (int k = 0; k < HALO_REC && n > 0; k++)
         memcpy(a[k] + lo, b + (size_t)k * n, (size_t)n * sizeof *b);
 }
 

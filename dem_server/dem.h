@@ -76,7 +76,8 @@ typedef struct dem_world_def {
     double dt_safety_rayleigh; /* dt must be <= this * Rayleigh time (default 0.3) */
     double dt_safety_hertz;    /* dt must be <= this * Hertz contact time (default 0.1) */
     bool allow_unstable;     /* true: a dt above the limits only warns */
-    int reorder_every;       /* re-sort grains by cell every N neighbour rebuilds (0 = never) */
+    int reorder_every;       /* re-sort grains by cell (and tag inside a cell) every N neighbour rebuilds
+                                (0 = never); 1 (the default) is needed by a distributed run */
     bool portable_kernel;    /* true: the pair kernel's portable path even where the CPU has AVX2 (the
                                 same bits either way; for the test that shows it) */
 } dem_world_def;
@@ -256,6 +257,8 @@ typedef struct dem_profile {
     double surface;   /* s, gravity, walls and the triangle surface (incl. BVH refit) */
     double pairs;     /* s, grain–grain narrow phase, forces summed into the grains in pair order */
     double integrate; /* s, Verlet, rotation, the moved-grain check */
+    double halo;      /* s, distributed run: ghosts refreshed and the rebuild decision agreed by every rank */
+    double migrate;   /* s, distributed run: slabs, grains to their new ranks, fresh ghosts (part of rebuild) */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */
     long surface_lists; /* rebuilds of the grains' triangle lists (the tree walked instead of the lists) */

@@ -185,6 +185,8 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
         cm_ckpt_u64(ck, "/pairs/hash_key", h->key, (size_t)cap);
         hash_rows(ck, h, cap);
         cm_ckpt_f64(ck, "/pairs/springs", w->hist_val[w->hist_cur], 3 * (size_t)w->n_pairs);
+        if (!ck->writing && ck->rc == CM_OK) /* which way each spring points: from the pairs read */
+            ck->rc = dem_hist_orient(w, ck->err);
     }
     cm_ckpt_double(ck, "/pairs/skin", &w->skin);
     cm_ckpt_int(ck, "/pairs/need_rebuild", &w->need_rebuild);

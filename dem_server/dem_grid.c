@@ -46,47 +46,61 @@ static int grow_pairs(dem_world *w, int need)
     return CM_OK;
 }
 
-typedef struct grid_dims {
-    double lo[3], h;
-    int n[3];
-} grid_dims;
-
-static int cell_of(const grid_dims *gd, double x, double y, double z)
+/* Cell of coordinate v along axis k: cells sit on the lattice of multiples
+ * of h (the box only says which ones exist), so that a grain's cell, and
+ * with it the order of the grains, does not depend on where other grains
+ * are: the same block of grains is ordered the same in any world. */
+static inline int axis_cell(const dem_grid_dims *gd, int k, double v)
 {
-    int c[3];
-    double p[3] = {x, y, z};
-    for (int k = 0; k < 3; k++) {
-        int ck = (int)floor((p[k] - gd->lo[k]) / gd->h);
-        c[k] = ck < 0 ? 0 : (ck >= gd->n[k] ? gd->n[k] - 1 : ck);
-    }
-    return (c[2] * gd->n[1] + c[1]) * gd->n[0] + c[0];
+    /* in doubles (integers, exact below 2^53): a grain flung far away by an
+     * unstable step still gets a cell, the nearest one */
+    double c = floor(v / gd->h) - gd->base[k];
+    return c >= 0.0 ? (c < gd->n[k] ? (int)c : gd->n[k] - 1) : 0;
 }
 
-/* Uniform grid over the grains' bounding box, cell >= 2 r_max + skin,
- * grains counting-sorted by cell. */
-static int grid_build(dem_world *w, grid_dims *gd)
+static int cell_of(const dem_grid_dims *gd, double x, double y, double z)
 {
-    dem_grains *g = &w->g;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int i = 0; i < g->n; i++) {
-        lo[0] = fmin(lo[0], g->x[i]), hi[0] = fmax(hi[0], g->x[i]);
-        lo[1] = fmin(lo[1], g->y[i]), hi[1] = fmax(hi[1], g->y[i]);
-        lo[2] = fmin(lo[2], g->z[i]), hi[2] = fmax(hi[2], g->z[i]);
-    }
-    double h = 2.0 * w->r_max + w->skin;
+    /* x slowest: x-slabs are slot ranges */
+    return (axis_cell(gd, 0, x) * gd->n[1] + axis_cell(gd, 1, y)) * gd->n[2] + axis_cell(gd, 2, z);
+}
+
+int dem_grid_column(const dem_grid_dims *gd, double x) { return axis_cell(gd, 0, x); }
+
+void dem_grid_dims_of(const double lo[3], const double hi[3], double h, long n_grains, dem_grid_dims *gd)
+{
     long ncell;
     for (;;) {
         ncell = 1;
         for (int k = 0; k < 3; k++) {
-            gd->n[k] = (int)fmin(1e6, floor((hi[k] - lo[k]) / h) + 1);
+            gd->base[k] = floor(lo[k] / h);
+            gd->n[k] = (int)fmin(1e6, floor(hi[k] / h) - gd->base[k] + 1.0);
             ncell *= gd->n[k];
         }
-        if (ncell <= 4L * g->n + 64)
+        if (ncell <= 4L * n_grains + 64)
             break;
         h *= 1.5; /* a few grains far away: coarser cells rather than a huge grid */
     }
-    memcpy(gd->lo, lo, sizeof lo);
     gd->h = h;
+}
+
+/* Uniform grid over the grains' bounding box (a distributed world: the
+ * global one, w->dist_grid), cell >= 2 r_max + skin, grains counting-sorted
+ * by cell and by tag inside a cell. */
+static int grid_build(dem_world *w, dem_grid_dims *gd)
+{
+    dem_grains *g = &w->g;
+    if (w->dist) {
+        *gd = w->dist_grid;
+    } else {
+        double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        for (int i = 0; i < g->n; i++) {
+            lo[0] = fmin(lo[0], g->x[i]), hi[0] = fmax(hi[0], g->x[i]);
+            lo[1] = fmin(lo[1], g->y[i]), hi[1] = fmax(hi[1], g->y[i]);
+            lo[2] = fmin(lo[2], g->z[i]), hi[2] = fmax(hi[2], g->z[i]);
+        }
+        dem_grid_dims_of(lo, hi, 2.0 * w->r_max + w->skin, g->n, gd);
+    }
+    long ncell = (long)gd->n[0] * gd->n[1] * gd->n[2];
     if (ncell + 1 > w->cell_cap) { /* grows only when the grains spread out */
         int *a = realloc(w->cell_start, (size_t)(ncell + 1) * sizeof *a);
         if (!a)
@@ -114,42 +128,98 @@ static int grid_build(dem_world *w, grid_dims *gd)
     memcpy(pos, w->cell_start, (size_t)(ncell + 1) * sizeof *pos);
     for (int i = 0; i < g->n; i++)
         w->cell_items[pos[w->grain_cell[i]]++] = i;
+    /* inside a cell by tag (insertion sort: a cell holds a few grains), so
+     * that the order of the grains is a function of the global state alone
+     * (positions and tags), not of their previous slots: every rank of a
+     * distributed run then holds its grains in the global order */
+    const int *tag = g->tag;
+    for (long c = 0; c < ncell; c++) {
+        int *it = w->cell_items;
+        for (int k = w->cell_start[c] + 1; k < w->cell_start[c + 1]; k++) {
+            int v = it[k], tv = tag[v], m = k;
+            while (m > w->cell_start[c] && tag[it[m - 1]] > tv) {
+                it[m] = it[m - 1];
+                m--;
+            }
+            it[m] = v;
+        }
+    }
+    return CM_OK;
+}
+
+/* Room for n orientations in both tables (kept). */
+static int grow_ori(dem_world *w, int n)
+{
+    if (n <= w->hist_ori_cap)
+        return CM_OK;
+    int c = w->hist_ori_cap ? w->hist_ori_cap : 1024;
+    while (c < n)
+        c *= 2;
+    for (int k = 0; k < 2; k++) {
+        unsigned char *o = realloc(w->hist_ori[k], (size_t)c);
+        if (!o)
+            return CM_ERR_NOMEM;
+        w->hist_ori[k] = o;
+    }
+    w->hist_ori_cap = c;
+    return CM_OK;
+}
+
+int dem_hist_orient(dem_world *w, cm_error *err)
+{
+    if (grow_ori(w, w->n_pairs))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step, w->n_pairs);
+    const int *tag = w->g.tag;
+    for (int p = 0; p < w->n_pairs; p++)
+        w->hist_ori[w->hist_cur][p] = tag[w->pi[p]] < tag[w->pj[p]];
     return CM_OK;
 }
 
 int dem_neighbour_rebuild(dem_world *w, cm_error *err)
 {
     dem_grains *g = &w->g;
-    grid_dims gd;
+    dem_grid_dims gd;
     if (grid_build(w, &gd))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
     if (w->def.reorder_every > 0 && w->rebuild_count % w->def.reorder_every == 0 && g->n > 1) {
         /* re-sort grains by cell (cell_items is that order) for memory locality */
         dem_grains_permute(w, w->cell_items);
-        if (grid_build(w, &gd))
-            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
+        /* the grid of the sorted grains: cell k's grains are now slots
+         * cell_start[k] .. in order (cell_starts unchanged) */
+        for (long c = 0, ncell = (long)gd.n[0] * gd.n[1] * gd.n[2]; c < ncell; c++)
+            for (int k = w->cell_start[c]; k < w->cell_start[c + 1]; k++)
+                w->grain_cell[k] = (int)c, w->cell_items[k] = k;
     }
+    /* A distributed world: only pairs with an owned grain (a left ghost
+     * pairs with owned grains only, the right ghosts come last and start no
+     * row). Either way the list is the global list restricted to this rank:
+     * rows in the global grain order, partners in a fixed cell order. */
+    if (!w->dist)
+        w->own_lo = 0, w->own_hi = g->n;
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    long n_cross = 0;
     w->n_pairs = 0;
-    for (int i = 0; i < g->n; i++) {
+    for (int i = 0; i < own_hi; i++) {
+        const int jmin = i < own_lo ? own_lo - 1 : i;
         int c = w->grain_cell[i];
-        int cx = c % gd.n[0], cy = (c / gd.n[0]) % gd.n[1], cz = c / (gd.n[0] * gd.n[1]);
+        int cz = c % gd.n[2], cy = (c / gd.n[2]) % gd.n[1], cx = c / (gd.n[2] * gd.n[1]);
         double ri = g->r[i] + w->skin;
-        for (int dz = -1; dz <= 1; dz++) {
-            int z = cz + dz;
-            if (z < 0 || z >= gd.n[2])
+        for (int dx = -1; dx <= 1; dx++) {
+            int x = cx + dx;
+            if (x < 0 || x >= gd.n[0])
                 continue;
             for (int dy = -1; dy <= 1; dy++) {
                 int y = cy + dy;
                 if (y < 0 || y >= gd.n[1])
                     continue;
-                for (int dx = -1; dx <= 1; dx++) {
-                    int x = cx + dx;
-                    if (x < 0 || x >= gd.n[0])
+                for (int dz = -1; dz <= 1; dz++) {
+                    int z = cz + dz;
+                    if (z < 0 || z >= gd.n[2])
                         continue;
-                    int cc = (z * gd.n[1] + y) * gd.n[0] + x;
+                    int cc = (x * gd.n[1] + y) * gd.n[2] + z;
                     for (int k = w->cell_start[cc]; k < w->cell_start[cc + 1]; k++) {
                         int j = w->cell_items[k];
-                        if (j <= i)
+                        if (j <= jmin)
                             continue;
                         double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
                         double cut = ri + g->r[j];
@@ -161,6 +231,7 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
                         w->pi[w->n_pairs] = i;
                         w->pj[w->n_pairs] = j;
                         w->n_pairs++;
+                        n_cross += i < own_lo || j >= own_hi;
                     }
                 }
             }
@@ -170,36 +241,51 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
      * n_active_pairs, their springs stay in the history untouched */
     int na = w->n_pairs;
     if (w->n_frozen > 0) {
-        int lo = 0, hi = w->n_pairs - 1;
-        for (;;) {
-            while (lo <= hi && !(g->frozen[w->pi[lo]] && g->frozen[w->pj[lo]]))
-                lo++;
-            while (lo <= hi && g->frozen[w->pi[hi]] && g->frozen[w->pj[hi]])
-                hi--;
-            if (lo >= hi)
-                break;
-            int ti = w->pi[lo], tj = w->pj[lo];
-            w->pi[lo] = w->pi[hi], w->pj[lo] = w->pj[hi];
-            w->pi[hi] = ti, w->pj[hi] = tj;
+        /* stable partition (the active pairs keep their order, a function of
+         * the global state); the frozen ones wait in the next history's
+         * array, free until it is filled below */
+        int *tmp = (int *)w->hist_val[1 - w->hist_cur], nf = 0;
+        na = 0;
+        for (int p = 0; p < w->n_pairs; p++) {
+            int i = w->pi[p], j = w->pj[p];
+            if (g->frozen[i] && g->frozen[j])
+                tmp[2 * nf] = i, tmp[2 * nf + 1] = j, nf++;
+            else
+                w->pi[na] = i, w->pj[na] = j, na++;
         }
-        na = lo;
+        for (int k = 0; k < nf; k++)
+            w->pi[na + k] = tmp[2 * k], w->pj[na + k] = tmp[2 * k + 1];
     }
     w->n_active_pairs = na;
+    w->n_cross_pairs = n_cross;
     /* history: every candidate pair is entered in the other table, its
      * spring carried over from the previous list when the pair was known */
     dem_hash *old = &w->hist[w->hist_cur], *nw = &w->hist[1 - w->hist_cur];
     const double *oval = w->hist_val[w->hist_cur];
     double *nval = w->hist_val[1 - w->hist_cur];
-    if (dem_hash_reset(nw, w->n_pairs))
+    if (dem_hash_reset(nw, w->n_pairs) || grow_ori(w, w->n_pairs))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
+    const unsigned char *oori = w->hist_ori[w->hist_cur];
+    unsigned char *nori = w->hist_ori[1 - w->hist_cur];
     for (int p = 0; p < w->n_pairs; p++) {
-        uint64_t key = dem_pair_key(g->tag[w->pi[p]], g->tag[w->pj[p]]); /* tags survive removals */
+        const int ti = g->tag[w->pi[p]], tj = g->tag[w->pj[p]];
+        uint64_t key = dem_pair_key(ti, tj); /* tags survive removals */
         nw->row[dem_hash_insert(nw, key)] = p;
-        int o = dem_hash_find(old, key);
-        if (o >= 0)
-            memcpy(nval + 3 * (size_t)p, oval + 3 * (size_t)old->row[o], 3 * sizeof(double));
-        else
-            nval[3 * p] = nval[3 * p + 1] = nval[3 * p + 2] = 0.0;
+        int o = dem_hash_find(old, key), flip = 0;
+        double *xi = nval + 3 * (size_t)p;
+        if (o >= 0) {
+            int r = old->row[o];
+            memcpy(xi, oval + 3 * (size_t)r, 3 * sizeof(double));
+            flip = oori[r] != (ti < tj); /* a re-sort swapped i and j */
+        } else if (w->hist_extra && (o = dem_hash_find(w->hist_extra, key)) >= 0) {
+            memcpy(xi, w->hist_extra_val + 3 * (size_t)w->hist_extra->row[o], 3 * sizeof(double));
+            flip = ti > tj; /* received lower tag first */
+        } else {
+            xi[0] = xi[1] = xi[2] = 0.0;
+        }
+        if (flip)
+            xi[0] = -xi[0], xi[1] = -xi[1], xi[2] = -xi[2];
+        nori[p] = ti < tj;
     }
     w->hist_cur = 1 - w->hist_cur;
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));

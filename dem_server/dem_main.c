@@ -37,6 +37,9 @@
 #include "scene.h"
 #include "signals.h"
 #include "timer.h"
+#ifdef DEMFEM_MPI
+#include "dem_mpi.h"
+#endif
 
 /* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
  * or stop at once before the exchange loop or 10 s later). */
@@ -68,6 +71,52 @@ static void ensure_passive_waiting(const options *o, int threads)
     cm_log_warn("cannot re-execute with OMP_WAIT_POLICY=passive (%s): OpenMP threads wait actively", strerror(errno));
 }
 
+/* MPI: started only when a launcher (mpirun) started this process, so that
+ * a plain dem_server behaves exactly as without MPI. With more than one rank
+ * the DEM-only run (--standalone) is distributed (dem_mpi.h): rank 0 builds
+ * or loads the bed and writes the outputs, the grains spread over the ranks
+ * at the first neighbour rebuild. */
+static int g_rank = 0, g_ranks = 1;
+
+static void mpi_start(void)
+{
+#ifdef DEMFEM_MPI
+    if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMIX_RANK") && !getenv("PMI_RANK")) /* no launcher */
+        return;
+    MPI_Init(NULL, NULL);
+    MPI_Comm_rank(MPI_COMM_WORLD, &g_rank);
+    MPI_Comm_size(MPI_COMM_WORLD, &g_ranks);
+    if (g_rank > 0) {
+        char tag[16];
+        snprintf(tag, sizeof tag, "dem:r%d", g_rank);
+        cm_log_set_tag(tag);
+    }
+#endif
+}
+
+/* A failing rank stops the others (they may wait in a collective). */
+static void mpi_abort_others(int code)
+{
+#ifdef DEMFEM_MPI
+    if (g_ranks > 1)
+        MPI_Abort(MPI_COMM_WORLD, code);
+#else
+    (void)code;
+#endif
+}
+
+static void mpi_stop(void)
+{
+#ifdef DEMFEM_MPI
+    int on = 0, off = 0;
+    MPI_Initialized(&on);
+    if (on)
+        MPI_Finalized(&off);
+    if (on && !off)
+        MPI_Finalize();
+#endif
+}
+
 typedef struct output_ctx {
     const dem_config *cfg;
     dem_output *out;
@@ -80,11 +129,24 @@ typedef struct output_ctx {
     dem_window *window; /* saved in checkpoints (NULL = none) */
     const char *resume_path;  /* checkpoint to resume from, NULL for a fresh run */
     long resume_exchange;
+    /* distributed run: frames of the whole world gathered into `view` (rank 0) */
+    int distributed, frames;  /* frames: rank 0 writes an output (the same on every rank) */
+    dem_world *view;
 } output_ctx;
 
 /* Writes grain frames and series lines at the configured step intervals. */
 static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
 {
+#ifdef DEMFEM_MPI
+    if (c->distributed) { /* every rank: the gather is collective */
+        const long step = dem_world_steps(w);
+        if (!c->frames || step - c->last_frame < c->cfg->output_every)
+            return CM_OK;
+        c->last_frame = step;
+        int rc = dem_mpi_gather(w, c->view, err);
+        return rc == CM_OK && g_rank == 0 ? dem_output_frame(c->out, c->view, err) : rc;
+    }
+#endif
     if (!c->out)
         return CM_OK;
     /* Called every exchange: only the step count, not dem_world_stats (a sum
@@ -272,6 +334,12 @@ static int run(const options *o)
     if (o->threads > 0)
         cfg.world.threads = o->threads;
     ensure_passive_waiting(o, cfg.world.threads);
+    mpi_start(); /* after the re-execution above */
+    if (g_ranks > 1 && !o->standalone) {
+        rc = cm_fail(&err, CM_ERR_STATE, "dem_server on %d MPI ranks runs DEM-only scenes (--standalone, ./run "
+                     "--dem-only) for now; the coupled tire over ranks is phase 2 of issue 17", g_ranks);
+        goto fail;
+    }
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -310,11 +378,13 @@ static int run(const options *o)
         if ((rc = cm_ckpt_choose(o->resume, &octx.resume_exchange, dem_path, fem_path, sizeof dem_path, &err)))
             goto fail;
         octx.resume_path = dem_path;
-    } else if (octx.dir && (rc = dem_output_open(cfg.output_dir, &octx.out, &err))) {
+    } else if (g_rank == 0 && octx.dir && (rc = dem_output_open(cfg.output_dir, &octx.out, &err))) {
         goto fail;
     }
+    if (g_rank > 0)
+        octx.dir = NULL; /* rank 0 writes */
     double t0 = cm_now(), bed_height = 0, bed_top = 0;
-    if (cfg.has_bed) {
+    if (cfg.has_bed && g_rank == 0) {
         bool loaded = false;
         rc = dem_bed_build(w, &cfg.bed, settle_progress, &octx, &loaded, &err);
         if (rc && octx.failed)
@@ -333,7 +403,7 @@ static int run(const options *o)
         if (cfg.window.enabled && !o->standalone && (rc = dem_window_create(w, &cfg.window, &window, &err)))
             goto fail;
     }
-    if ((rc = add_listed_grains(scene, &cfg, w, &err)))
+    if (g_rank == 0 && (rc = add_listed_grains(scene, &cfg, w, &err)))
         goto fail;
     /* The run starts here: its first frame is the initial state. */
     if (octx.out && !o->resume && ((rc = dem_output_frame(octx.out, w, &err)) || (rc = dem_output_series(octx.out, w, &err))))
@@ -348,13 +418,14 @@ static int run(const options *o)
     cm_scene_skip_foreign(scene, sections); /* fem, wheel, scm: the other programs' */
     if ((rc = cm_scene_check_unknown(scene, sections, &err)))
         goto fail;
-    if (dem_grain_count(w) == 0) {
+    if (g_rank == 0 && dem_grain_count(w) == 0) {
         rc = cm_fail(&err, CM_ERR_KEY, "%s: no grains (give dem.bed or dem.grains)", o->scene);
         goto fail;
     }
     double t_rayleigh, t_hertz;
     dem_time_limits(w, &t_rayleigh, &t_hertz);
-    cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s)", dem_grain_count(w),
+    if (g_rank == 0) /* the others hold no grain yet */
+        cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s)", dem_grain_count(w),
                 rcfg.dt, t_rayleigh, t_hertz);
     cm_runrec_num(&rec, "grains", dem_grain_count(w));
     cm_runrec_num(&rec, "dt", rcfg.dt);
@@ -367,6 +438,20 @@ static int run(const options *o)
     if (o->standalone) {
         long steps = (long)(rcfg.end_time / rcfg.dt + 0.5);
         double last = cm_now();
+#ifdef DEMFEM_MPI
+        if (g_ranks > 1) {
+            if ((rc = dem_mpi_attach(w, MPI_COMM_WORLD, &err)))
+                goto fail;
+            octx.distributed = 1;
+            octx.frames = octx.out != NULL;
+            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
+                goto fail;
+            if (g_rank == 0 && steps > 0 && octx.out)
+                cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
+                            "state only (its contact counts over ranks are phase 2 of issue 17)", g_ranks);
+        }
+#endif
         for (long k = 0; k < steps && !g_sig->stop; k++) {
             if ((rc = dem_step(w, &err)) || (rc = write_outputs(w, &octx, &err)))
                 goto fail;
@@ -376,6 +461,13 @@ static int run(const options *o)
             }
         }
         exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 0;
+        uint64_t hash = dem_world_hash(w);
+#ifdef DEMFEM_MPI
+        if (g_ranks > 1 && (rc = dem_mpi_hash(w, &hash, &err)))
+            goto fail;
+#endif
+        cm_log_info("final state: dem_world_hash %016llx (%d rank%s)", (unsigned long long)hash, g_ranks,
+                    g_ranks > 1 ? "s" : "");
     } else {
         def.bed_height = bed_height;
         def.bed_top = bed_top;
@@ -411,16 +503,26 @@ static int run(const options *o)
         dem_stats s;
         dem_world_stats(w, &s);
         report_profile(&s.profile, o->standalone ? NULL : &cprof, octx.dir);
+#ifdef DEMFEM_MPI
+        if (g_ranks > 1) {
+            dem_mpi_stats ms;
+            dem_mpi_stats_get(w, &ms);
+            cm_log_info("rank %d of %d: %d grains (+%d ghosts), cell columns [%d, %d), %ld migrated; halo %.2f s, "
+                        "migration %.2f s", g_rank, g_ranks, ms.owned, ms.ghosts, ms.col_lo, ms.col_hi,
+                        ms.migrated, s.profile.halo, s.profile.migrate);
+        }
+#endif
     }
     goto cleanup;
 fail:
     cm_log_error("%s", err.msg);
+    mpi_abort_others(1);
     if (ch)
         ipc_fail(ch, "dem_server: %s", err.msg);
     exit_code = 1;
 cleanup:
     ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
-    if (o->out) {
+    if (o->out && g_rank == 0) {
         char path[1100];
         snprintf(path, sizeof path, "%s/dem_run.json", o->out);
         cm_runrec_num(&rec, "exchanges", (double)cprof.exchanges);
@@ -432,6 +534,7 @@ cleanup:
             cm_log_warn("%s", rerr.msg);
     }
     dem_output_close(&octx.out);
+    dem_world_destroy(&octx.view);
     dem_window_free(&window);
     dem_world_destroy(&w);
     cm_scene_close(&scene);
@@ -495,5 +598,7 @@ int main(int argc, char **argv)
         cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
         return 1;
     }
-    return run(&o);
+    int rc = run(&o);
+    mpi_stop();
+    return rc;
 }

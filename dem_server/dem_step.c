@@ -5,8 +5,11 @@
  *              pair's force added into its grains in pair-list order, the
  *              same sums for any thread count (dem_pairs.c)
  *   integrate  Verlet (eqs. 4–5), ω and quaternion, largest displacement
+ *   halo       distributed run only: the ghosts' states from their ranks,
+ *              the largest displacement over all ranks (dem_mpi.c)
  *   rebuild    neighbour grid, re-sort and pair list when a grain moved
- *              more than skin/2 (or the grains changed; dem_grid.c)
+ *              more than skin/2 (or the grains changed; dem_grid.c); in a
+ *              distributed run after stage "migrate" (dem_mpi.c)
  * In the coupled loop (dem_coupled.c) the exchange sits between surface and
  * pairs, so that pairs and integrate overlap the FEM's step. */
 #include "dem_world.h"
@@ -116,8 +119,18 @@ int dem_step_surface(dem_world *w, cm_error *err)
     }
     double t0 = cm_now();
     dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads, nw = w->n_walls;
+    const int nt = w->n_threads, nw = w->n_walls;
     const int shaped = w->n_shaped > 0;
+    /* distributed: walls for the owned grains; the ghosts' sums only start
+     * at zero (their pairs add into them, nothing reads them) */
+    const int g0 = w->dist ? w->own_lo : 0, n = (w->dist ? w->own_hi : g->n) - g0;
+    if (w->dist) {
+        double *f[] = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
+        for (int k = 0; k < 6; k++) {
+            memset(f[k], 0, (size_t)g0 * sizeof(double));
+            memset(f[k] + g0 + n, 0, (size_t)(g->n - g0 - n) * sizeof(double));
+        }
+    }
     int contacts = 0;
     for (int t = 0; t < nt; t++)
         memset(w->tb[t].wall_f, 0, sizeof w->tb[t].wall_f);
@@ -126,7 +139,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
 #endif
     {
         int tid = thread_id();
-        int lo = (int)((long)n * tid / nt), hi = (int)((long)n * (tid + 1) / nt);
+        int lo = g0 + (int)((long)n * tid / nt), hi = g0 + (int)((long)n * (tid + 1) / nt);
         double(*wf)[3] = w->tb[tid].wall_f;
         contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
     }
@@ -237,18 +250,19 @@ static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *max
 static int stage_integrate(dem_world *w, double *maxd2_out)
 {
     dem_grains *g = &w->g;
-    const int n = g->n, nt = w->n_threads;
+    const int nt = w->n_threads;
+    const int g0 = w->dist ? w->own_lo : 0, n = w->dist ? w->own_hi : g->n; /* the owned grains */
     const double dt = w->def.dt;
     const int shaped = w->n_shaped > 0;
     double maxd2 = 0.0;
     int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
     if (shaped)
-        for (int i = 0; i < n; i++)
+        for (int i = g0; i < n; i++)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, 0, n, dt, &maxd2, w->def.portable_kernel);
+        bad = integrate_range(g, g0, n, dt, &maxd2, w->def.portable_kernel);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -256,14 +270,15 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
         {
             int tid = thread_id();
             double m2;
-            int b = integrate_range(g, (int)((long)n * tid / nt), (int)((long)n * (tid + 1) / nt), dt, &m2,
+            const long no = n - g0;
+            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2,
                                     w->def.portable_kernel);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;
         }
     }
-    if (bad > n)
-        bad = n;
+    if (bad > g->n)
+        bad = g->n;
     if (shaped) {
         /* Shaped grains: the loop above moved them (translation is the same)
          * but treated their rotation as a sphere's; redo it. Euler's
@@ -274,7 +289,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
 #ifdef _OPENMP
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 #endif
-        for (int i = 0; i < n; i++) {
+        for (int i = g0; i < n; i++) {
             if (g->shape[i] < 0 || g->frozen[i])
                 continue;
             double *L = g->angmom + 3 * i, *q = g->q + 4 * i, om[3];
@@ -288,6 +303,13 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     return bad;
 }
 
+/* Stage "rebuild": the neighbour list, in a distributed run after the
+ * migration of grains between ranks (dem_mpi.c). */
+static int rebuild(dem_world *w, cm_error *err)
+{
+    return w->dist ? w->dist->rebuild(w, err) : dem_neighbour_rebuild(w, err);
+}
+
 /* The rest of the step after the surface stage: rebuild (if the grains
  * changed) -> pairs -> integrate -> rebuild if a grain moved more
  * than skin/2. */
@@ -297,7 +319,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
     double t0 = cm_now();
     if (w->need_rebuild || !w->plan.valid) {
-        int rc = w->need_rebuild ? dem_neighbour_rebuild(w, err) : dem_pair_plan_build(w, err);
+        int rc = w->need_rebuild ? rebuild(w, err) : dem_pair_plan_build(w, err);
         if (rc)
             return rc;
         double t = cm_now();
@@ -318,9 +340,22 @@ int dem_step_grains(dem_world *w, cm_error *err)
     if (bad < w->g.n)
         return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
                        w->step, w->time, w->g.id[bad]);
+    if (w->dist) { /* stage "halo": ghosts from their owners, the rebuild decided by all */
+        int any_bad = 0, rc = w->dist->halo(w, err);
+        if (rc == CM_OK)
+            rc = w->dist->agree(w, &maxd2, &any_bad, err);
+        double t = cm_now();
+        w->prof.halo += t - t1;
+        t1 = t;
+        if (rc)
+            return rc;
+        if (any_bad)
+            return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): a grain of another rank has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
+                           w->step, w->time);
+    }
     const double half = 0.5 * w->skin;
     if (maxd2 > half * half) {
-        int rc = dem_neighbour_rebuild(w, err);
+        int rc = rebuild(w, err);
         w->prof.rebuild += cm_now() - t1;
         if (rc)
             return rc;

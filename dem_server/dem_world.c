@@ -35,7 +35,7 @@ dem_world_def dem_world_def_default(void)
     d.dt_safety_rayleigh = 0.3;
     d.dt_safety_hertz = 0.1;
     d.allow_unstable = false;
-    d.reorder_every = 20;
+    d.reorder_every = 1;
     return d;
 }
 
@@ -162,6 +162,8 @@ void dem_world_destroy(dem_world **wp)
     dem_world *w = *wp;
     if (!w)
         return;
+    if (w->dist && w->dist->release)
+        w->dist->release(w);
     dem_grains *g = &w->g;
     free(g->block); /* x .. z0 */
     free(g->q);
@@ -193,6 +195,8 @@ void dem_world_destroy(dem_world **wp)
     free(w->plan.con);
     free(w->hist_val[0]);
     free(w->hist_val[1]);
+    free(w->hist_ori[0]);
+    free(w->hist_ori[1]);
     dem_hash_free(&w->hist[0]);
     dem_hash_free(&w->hist[1]);
     if (w->tb)

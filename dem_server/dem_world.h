@@ -88,6 +88,29 @@ typedef struct dem_thread_buf {
     double pad[8];     /* keeps two threads' wall_f apart by a cache line (no false sharing) */
 } dem_thread_buf;
 
+/* The cell grid of the neighbour list: cell size h, cells per axis; cell
+ * (cx, cy, cz) spans [(base + c) h, (base + c + 1) h) along each axis, index
+ * (cx n1 + cy) n2 + cz, x slowest. */
+typedef struct dem_grid_dims {
+    double h;
+    double base[3]; /* integers: the first cell's index on the lattice */
+    int n[3];
+} dem_grid_dims;
+
+/* A distributed run (dem_mpi.c, MPI kept out of this library): the stages
+ * the step calls on every rank, in the same order on all of them. */
+typedef struct dem_dist_ops {
+    /* migration of owned grains (with their springs) to the ranks of their
+     * new slabs, fresh ghosts, then dem_neighbour_rebuild on the global grid */
+    int (*rebuild)(dem_world *w, cm_error *err);
+    /* the ghosts' positions and velocities from their owners, after integrate */
+    int (*halo)(dem_world *w, cm_error *err);
+    /* *maxd2 and *bad (non-zero: a non-finite grain somewhere) over every rank */
+    int (*agree)(dem_world *w, double *maxd2, int *bad, cm_error *err);
+    /* frees the distribution's own data (dem_world_destroy calls it) */
+    void (*release)(dem_world *w);
+} dem_dist_ops;
+
 struct dem_world {
     dem_world_def def;
     int n_mat;
@@ -108,6 +131,11 @@ struct dem_world {
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
     int hist_cur;
+    /* per row of hist_val[k]: 1 when the pair's i has the lower tag. A
+     * spring is the displacement of i relative to j: when a re-sort swaps a
+     * pair's order it is carried over negated */
+    unsigned char *hist_ori[2];
+    int hist_ori_cap;
     double skin;
     int need_rebuild;
     /* cell grid */
@@ -130,6 +158,20 @@ struct dem_world {
 
     int next_tag;       /* tag of the next grain added */
     int n_frozen;
+
+    /* distributed run: NULL ops for a world of its own. The rank integrates
+     * slots [own_lo, own_hi); the slots before and after are ghosts (copies
+     * of the neighbouring slabs' grains within one cell), refreshed every
+     * step. Without ops own_lo = 0 and own_hi = n at every rebuild. */
+    const dem_dist_ops *dist;
+    void *dist_ctx;
+    dem_grid_dims dist_grid; /* the global grid, set by dist->rebuild */
+    int own_lo, own_hi;
+    /* springs that arrived with migrated grains, searched after the previous
+     * list's (NULL when none), each oriented lower tag first */
+    const dem_hash *hist_extra;
+    const double *hist_extra_val;
+    long n_cross_pairs; /* pairs owned–ghost in the last list (distributed) */
 
     long step;
     double time;
@@ -167,6 +209,14 @@ static inline int dem_grow_ints(int **a, int *cap, int need)
  * (also after grains or walls changed), and the neighbour list. */
 int dem_world_prepare(dem_world *w, cm_error *err);
 int dem_neighbour_rebuild(dem_world *w, cm_error *err);
+/* The orientations of the current list's springs (hist_ori) from its pairs'
+ * tags, after the list was read back (a checkpoint). */
+int dem_hist_orient(dem_world *w, cm_error *err);
+/* The grid over the box [lo, hi] for cells >= h and n_grains grains (coarser
+ * when a few grains far away would make it huge), and a position's cell
+ * column along x: every rank computes the same from the same global box. */
+void dem_grid_dims_of(const double lo[3], const double hi[3], double h, long n_grains, dem_grid_dims *gd);
+int dem_grid_column(const dem_grid_dims *gd, double x);
 /* dem_timestep.c: dem.dt against the time-step limits (error naming the
  * limit and the setting to change). */
 int dem_check_dt(dem_world *w, cm_error *err);

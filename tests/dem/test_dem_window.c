@@ -19,13 +19,14 @@
 
 /* Two separate blocks of grains on a floor (x < 0.05 and x > 0.07), let
  * fall and touch for a while so that walls and pairs hold springs. */
-static dem_world *two_blocks(int *n_left, int right_only)
+static dem_world *two_blocks_sorted(int *n_left, int right_only, int reorder_every)
 {
     dem_material m = test_material(5e7, 0.3, 0.5, 0.5);
     double g[3] = {0, 0, -9.81};
     dem_world *w = test_world(&m, 1, 2e-5, 400, g, 1);
     if (!w)
         return NULL;
+    w->def.reorder_every = reorder_every;
     cm_error err = {0};
     const double floor_p[3] = {0, 0, 0}, floor_n[3] = {0, 0, 1};
     dem_wall_add(w, floor_p, floor_n, 0, &err);
@@ -51,14 +52,25 @@ static dem_world *two_blocks(int *n_left, int right_only)
     return w;
 }
 
+static dem_world *two_blocks(int *n_left, int right_only)
+{
+    return two_blocks_sorted(n_left, right_only, dem_world_def_default().reorder_every);
+}
+
 /* Removing the left block: count, survivors' states, mass and momentum
  * unchanged, ids dense in the old order, tags kept; the removed grains'
  * pair springs gone, the survivors' ones kept; and the right block then
- * moves exactly as it does in a world that never held the left one. */
-static int remove_compacts(void)
+ * moves exactly as it does in a world that never held the left one: bit
+ * for bit while the grains keep their order (reorder_every = 0: the grain
+ * order and the cells do not depend on the other block), to round-off when
+ * each world re-sorts its grains at its own rebuilds (the default, every
+ * rebuild: the two worlds rebuild at different steps, as their largest
+ * displacements differ; 1.3e-8 m after 3500 steps measured, 2.6e-6 of a
+ * radius, where the earlier order kept for 20 rebuilds gave < 1e-9). */
+static int remove_compacts_order(int reorder_every, double tol)
 {
     int n_left;
-    dem_world *w = two_blocks(&n_left, 0);
+    dem_world *w = two_blocks_sorted(&n_left, 0, reorder_every);
     ENSURE(w);
     cm_error err = {0};
     int n = dem_grain_count(w);
@@ -127,7 +139,7 @@ static int remove_compacts(void)
     /* the right block alone from the start (the blocks never touch): the
      * same motion, to round-off (the pair order differs) */
     int nr;
-    dem_world *ref = two_blocks(&nr, 1);
+    dem_world *ref = two_blocks_sorted(&nr, 1, reorder_every);
     ENSURE(ref && dem_grain_count(ref) == n - n_left);
     ENSURE(dem_step(ref, &err) == 0);
     for (int s = 0; s < 500; s++)
@@ -140,11 +152,17 @@ static int remove_compacts(void)
         for (int c = 0; c < 3; c++)
             maxd = fmax(maxd, fabs(a.x[c] - b.x[c]));
     }
-    ENSURE_MSG(maxd < 1e-9, "right block alone vs after removal: %g m apart", maxd);
+    printf("reorder_every = %d: right block alone vs after removal %g m apart\n", reorder_every, maxd);
+    ENSURE_MSG(maxd <= tol, "right block alone vs after removal: %g m apart", maxd);
     free(before), free(tag_before);
     dem_world_destroy(&w);
     dem_world_destroy(&ref);
     return 0;
+}
+
+static int remove_compacts(void)
+{
+    return remove_compacts_order(0, 0.0) || remove_compacts_order(dem_world_def_default().reorder_every, 1e-7);
 }
 
 /* Removal by ids, then copies of saved states (shaped grains included) at an

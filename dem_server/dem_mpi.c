@@ -1,0 +1,645 @@
+/* The distributed world (dem_mpi.h): slabs along x, ghosts, migration. The
+ * step (dem_step.c) calls three stages through w->dist:
+ *   rebuild  global box and grid (allreduce) -> slab bounds from the grain
+ *            counts per cell column (allreduce) -> owned grains leaving the
+ *            slab sent to their new ranks with the springs of their pairs
+ *            (alltoallv) -> ghosts from the two neighbouring slabs -> the
+ *            neighbour list on the global grid (dem_neighbour_rebuild)
+ *   halo     after integrate: ghosts' positions and velocities from their
+ *            owners (two sendrecv)
+ *   agree    the largest displacement and the non-finite flag over all
+ *            ranks (allreduce), so that every rank rebuilds at the same step
+ * Layout of a rank's slots after a rebuild: [left ghosts | owned | right
+ * ghosts], the global order restricted to them (cells x slowest): the left
+ * ghosts are the left neighbour's grains of its last column in its order,
+ * so halo messages are contiguous slot ranges matched one to one. */
+#include "dem_mpi.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dem_world.h"
+#include "timer.h"
+
+typedef struct dist_ctx {
+    MPI_Comm comm;
+    int rank, size;
+    int col_lo, col_hi;        /* this rank's slab: cell columns [col_lo, col_hi) */
+    int n_send_lo, n_send_hi;  /* owned grains that are ghosts of rank - 1 / rank + 1 (first / last owned slots) */
+    int distributed;           /* 0 until the first rebuild spread rank 0's grains */
+    long scattered, migrated, springs_sent;
+    int *bounds;               /* size + 1 */
+    long *cols, cols_cap;      /* grain counts per cell column (global after the allreduce) */
+    int *dest;                 /* per slot: rank of the grain's new slab (owned grains) */
+    int *scount, *sdispl, *rcount, *rdispl; /* size each, alltoallv */
+    int *hcount, *hdispl, *hrcount, *hrdispl;
+    int *hwhere;               /* per rank: fill cursor */
+    double *sbuf, *rbuf;       /* grain records */
+    size_t sbuf_cap, rbuf_cap;
+    double *hsbuf, *hrbuf;     /* spring records: tag, tag, 3 doubles */
+    size_t hsbuf_cap, hrbuf_cap;
+    dem_hash extra;            /* received springs, by tag pair */
+    double *extra_val;
+    size_t extra_cap;
+    int *order;                /* cap: the kept slots at a rebuild */
+} dist_ctx;
+
+enum { REC_FIXED = 39, SPRING_REC = 5 };
+
+static size_t rec_size(const dem_world *w) { return REC_FIXED + 3 * (size_t)w->wall_stride; }
+
+/* Everything a grain carries, as doubles (integers exactly). */
+static void pack_grain(const dem_world *w, int i, double *r)
+{
+    const dem_grains *g = &w->g;
+    const double v[REC_FIXED] = {
+        g->x[i],     g->y[i],     g->z[i],     g->vx[i],    g->vy[i],    g->vz[i],    g->wx[i],
+        g->wy[i],    g->wz[i],    g->fx[i],    g->fy[i],    g->fz[i],    g->tx[i],    g->ty[i],
+        g->tz[i],    g->r[i],     g->inv_m[i], g->inv_i[i], g->q[4 * i], g->q[4 * i + 1], g->q[4 * i + 2],
+        g->q[4 * i + 3], g->x0[i], g->y0[i],   g->z0[i],    g->sc[i],    g->inertia[3 * i], g->inertia[3 * i + 1],
+        g->inertia[3 * i + 2], g->angmom[3 * i], g->angmom[3 * i + 1], g->angmom[3 * i + 2], g->mat[i],
+        g->tag[i],   g->frozen[i], g->shape[i], g->wall_mask[i], g->surf_count[i], g->wall_near[i]};
+    memcpy(r, v, sizeof v);
+    memcpy(r + REC_FIXED, g->wall_hist + (size_t)i * 3 * w->wall_stride, 3 * (size_t)w->wall_stride * sizeof *r);
+}
+
+static void unpack_grain(dem_world *w, int i, const double *r)
+{
+    dem_grains *g = &w->g;
+    double *d[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy,
+                   g->wz, g->fx, g->fy, g->fz, g->tx, g->ty,    g->tz,    g->r,
+                   g->inv_m, g->inv_i};
+    for (int k = 0; k < 18; k++)
+        d[k][i] = r[k];
+    memcpy(g->q + 4 * i, r + 18, 4 * sizeof *r);
+    g->x0[i] = r[22], g->y0[i] = r[23], g->z0[i] = r[24], g->sc[i] = r[25];
+    memcpy(g->inertia + 3 * i, r + 26, 3 * sizeof *r);
+    memcpy(g->angmom + 3 * i, r + 29, 3 * sizeof *r);
+    g->mat[i] = (int)r[32], g->tag[i] = (int)r[33], g->frozen[i] = (unsigned char)r[34];
+    g->shape[i] = (int)r[35], g->wall_mask[i] = (uint32_t)r[36], g->surf_count[i] = (int)r[37];
+    g->wall_near[i] = (uint32_t)r[38];
+    memcpy(g->wall_hist + (size_t)i * 3 * w->wall_stride, r + REC_FIXED, 3 * (size_t)w->wall_stride * sizeof *r);
+}
+
+static int grow(double **a, size_t *cap, size_t need)
+{
+    if (need <= *cap)
+        return 0;
+    size_t c = *cap ? *cap : 4096;
+    while (c < need)
+        c *= 2;
+    double *b = realloc(*a, c * sizeof *b);
+    if (!b)
+        return 1;
+    *a = b, *cap = c;
+    return 0;
+}
+
+static int mpi_fail(cm_error *err, int code, const char *what, long step)
+{
+    char msg[MPI_MAX_ERROR_STRING];
+    int len = 0;
+    MPI_Error_string(code, msg, &len);
+    return cm_fail(err, CM_ERR_IO, "step %ld: MPI %s failed: %s", step, what, msg);
+}
+
+int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err)
+{
+    if (n_cols < ranks)
+        return cm_fail(err, CM_ERR_RANGE,
+                       "%d ranks but the grains span only %d cell columns along x: use at most %d ranks", ranks,
+                       n_cols, n_cols);
+    long total = 0;
+    for (int c = 0; c < n_cols; c++)
+        total += count[c];
+    bounds[0] = 0;
+    long run = 0;
+    int c = 0;
+    for (int r = 1; r < ranks; r++) {
+        /* first column whose preceding count reaches r/ranks of the total */
+        long target = (long)((double)total * r / ranks + 0.5);
+        while (c < n_cols && run < target)
+            run += count[c++];
+        int b = c;
+        if (b < bounds[r - 1] + 1)
+            b = bounds[r - 1] + 1; /* at least one column each */
+        if (b > n_cols - (ranks - r))
+            b = n_cols - (ranks - r);
+        bounds[r] = b;
+        while (c < b)
+            run += count[c++];
+    }
+    bounds[ranks] = n_cols;
+    return CM_OK;
+}
+
+static int rank_of_col(const dist_ctx *d, int col)
+{
+    int lo = 0, hi = d->size - 1; /* bounds[lo] <= col < bounds[hi + 1] */
+    while (lo < hi) {
+        int mid = (lo + hi + 1) / 2;
+        if (d->bounds[mid] <= col)
+            lo = mid;
+        else
+            hi = mid - 1;
+    }
+    return lo;
+}
+
+/* Moves slots order[0 .. k) to 0 .. k and makes k the grain count. */
+static void keep_slots(dem_world *w, const int *order, int k)
+{
+    dem_grains *g = &w->g;
+    g->n = k;
+    dem_grains_permute(w, order);
+}
+
+static int dist_rebuild(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    dem_grains *g = &w->g;
+    const double t0 = cm_now();
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    int rc;
+    /* 1. the global box and grid (over the owned grains of every rank) */
+    double box[6] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY}; /* lo, -hi */
+    for (int i = own_lo; i < own_hi; i++) {
+        box[0] = fmin(box[0], g->x[i]), box[3] = fmin(box[3], -g->x[i]);
+        box[1] = fmin(box[1], g->y[i]), box[4] = fmin(box[4], -g->y[i]);
+        box[2] = fmin(box[2], g->z[i]), box[5] = fmin(box[5], -g->z[i]);
+    }
+    long n_own = own_hi - own_lo, n_all = 0;
+    if ((rc = MPI_Allreduce(MPI_IN_PLACE, box, 6, MPI_DOUBLE, MPI_MIN, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Allreduce(&n_own, &n_all, 1, MPI_LONG, MPI_SUM, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "allreduce of the box", w->step);
+    if (n_all == 0)
+        box[0] = box[1] = box[2] = box[3] = box[4] = box[5] = 0.0;
+    double lo[3] = {box[0], box[1], box[2]}, hi[3] = {-box[3], -box[4], -box[5]};
+    dem_grid_dims_of(lo, hi, 2.0 * w->r_max + w->skin, n_all, &w->dist_grid);
+    const dem_grid_dims *gd = &w->dist_grid;
+    /* 2. slabs from the grains per column */
+    const int n_cols = gd->n[0];
+    if (n_cols > d->cols_cap) {
+        long *c = realloc(d->cols, (size_t)n_cols * sizeof *c);
+        if (!c)
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d cell columns", w->step, n_cols);
+        d->cols = c, d->cols_cap = n_cols;
+    }
+    memset(d->cols, 0, (size_t)n_cols * sizeof *d->cols);
+    for (int i = own_lo; i < own_hi; i++) {
+        int c = dem_grid_column(gd, g->x[i]);
+        d->dest[i] = c; /* the column for now */
+        d->cols[c]++;
+    }
+    if ((rc = MPI_Allreduce(MPI_IN_PLACE, d->cols, n_cols, MPI_LONG, MPI_SUM, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "allreduce of the column counts", w->step);
+    if ((rc = dem_mpi_slabs(d->cols, n_cols, d->size, d->bounds, err)))
+        return rc;
+    d->col_lo = d->bounds[d->rank], d->col_hi = d->bounds[d->rank + 1];
+    /* 3. owned grains leaving: records grouped by destination, in slot order */
+    memset(d->scount, 0, (size_t)d->size * sizeof *d->scount);
+    memset(d->hcount, 0, (size_t)d->size * sizeof *d->hcount);
+    int n_keep = 0;
+    for (int i = own_lo; i < own_hi; i++) {
+        d->dest[i] = rank_of_col(d, d->dest[i]);
+        if (d->dest[i] == d->rank)
+            d->order[n_keep++] = i;
+        else
+            d->scount[d->dest[i]]++;
+    }
+    /* springs of the pairs of leaving grains (the previous list, every pair
+     * with an owned grain), to each new rank of an owned grain of the pair */
+    const double *hv = w->hist_val[w->hist_cur];
+    for (int p = 0; p < w->n_pairs; p++) {
+        int a = w->pi[p], b = w->pj[p];
+        int ra = a >= own_lo && a < own_hi ? d->dest[a] : d->rank;
+        int rb = b >= own_lo && b < own_hi ? d->dest[b] : d->rank;
+        if (ra != d->rank)
+            d->hcount[ra]++;
+        if (rb != d->rank && rb != ra)
+            d->hcount[rb]++;
+    }
+    const size_t rs = rec_size(w);
+    d->sdispl[0] = d->hdispl[0] = 0;
+    for (int r = 1; r < d->size; r++) {
+        d->sdispl[r] = d->sdispl[r - 1] + d->scount[r - 1];
+        d->hdispl[r] = d->hdispl[r - 1] + d->hcount[r - 1];
+    }
+    const long n_out = d->sdispl[d->size - 1] + d->scount[d->size - 1];
+    const long h_out = d->hdispl[d->size - 1] + d->hcount[d->size - 1];
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n_out * rs) ||
+        grow(&d->hsbuf, &d->hsbuf_cap, (size_t)h_out * SPRING_REC))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld migrating grains", w->step, n_out);
+    memcpy(d->hwhere, d->sdispl, (size_t)d->size * sizeof *d->hwhere);
+    for (int i = own_lo; i < own_hi; i++)
+        if (d->dest[i] != d->rank)
+            pack_grain(w, i, d->sbuf + (size_t)d->hwhere[d->dest[i]]++ * rs);
+    memcpy(d->hwhere, d->hdispl, (size_t)d->size * sizeof *d->hwhere);
+    for (int p = 0; p < w->n_pairs; p++) {
+        int a = w->pi[p], b = w->pj[p];
+        int ra = a >= own_lo && a < own_hi ? d->dest[a] : d->rank;
+        int rb = b >= own_lo && b < own_hi ? d->dest[b] : d->rank;
+        /* lower tag first: the spring of i relative to j, negated if i is the higher */
+        const double sg = g->tag[a] < g->tag[b] ? 1.0 : -1.0;
+        const double rec[SPRING_REC] = {g->tag[a], g->tag[b], sg * hv[3 * (size_t)p], sg * hv[3 * (size_t)p + 1],
+                                        sg * hv[3 * (size_t)p + 2]};
+        if (ra != d->rank)
+            memcpy(d->hsbuf + (size_t)d->hwhere[ra]++ * SPRING_REC, rec, sizeof rec);
+        if (rb != d->rank && rb != ra)
+            memcpy(d->hsbuf + (size_t)d->hwhere[rb]++ * SPRING_REC, rec, sizeof rec);
+    }
+    if (d->distributed)
+        d->migrated += n_out, d->springs_sent += h_out;
+    else
+        d->scattered += n_out;
+    d->distributed = 1;
+    if ((rc = MPI_Alltoall(d->scount, 1, MPI_INT, d->rcount, 1, MPI_INT, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Alltoall(d->hcount, 1, MPI_INT, d->hrcount, 1, MPI_INT, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "alltoall of the migration counts", w->step);
+    d->rdispl[0] = d->hrdispl[0] = 0;
+    for (int r = 1; r < d->size; r++) {
+        d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
+        d->hrdispl[r] = d->hrdispl[r - 1] + d->hrcount[r - 1];
+    }
+    const long n_in = d->rdispl[d->size - 1] + d->rcount[d->size - 1];
+    const long h_in = d->hrdispl[d->size - 1] + d->hrcount[d->size - 1];
+    if (n_keep + n_in > g->cap)
+        return cm_fail(err, CM_ERR_RANGE, "step %ld: rank %d would hold %ld grains, more than max_grains = %d",
+                       w->step, d->rank, n_keep + n_in, g->cap);
+    if (grow(&d->rbuf, &d->rbuf_cap, (size_t)n_in * rs) || grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h_in * SPRING_REC))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld arriving grains", w->step, n_in);
+    /* counts and displacements in doubles (records are whole doubles) */
+    for (int r = 0; r < d->size; r++) {
+        d->scount[r] *= (int)rs, d->sdispl[r] *= (int)rs, d->rcount[r] *= (int)rs, d->rdispl[r] *= (int)rs;
+        d->hcount[r] *= SPRING_REC, d->hdispl[r] *= SPRING_REC;
+        d->hrcount[r] *= SPRING_REC, d->hrdispl[r] *= SPRING_REC;
+    }
+    if ((rc = MPI_Alltoallv(d->sbuf, d->scount, d->sdispl, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE,
+                            d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Alltoallv(d->hsbuf, d->hcount, d->hdispl, MPI_DOUBLE, d->hrbuf, d->hrcount, d->hrdispl,
+                            MPI_DOUBLE, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "alltoallv of the migrating grains", w->step);
+    /* 4. the staying grains first (ghosts dropped), then the arrivals */
+    keep_slots(w, d->order, n_keep);
+    for (long k = 0; k < n_in; k++)
+        unpack_grain(w, g->n++, d->rbuf + (size_t)k * rs);
+    /* springs that came with them, for the carry-over of the new list */
+    if (grow(&d->extra_val, &d->extra_cap, 3 * (size_t)(h_in ? h_in : 1)) || dem_hash_reset(&d->extra, (int)h_in))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld arriving springs", w->step, h_in);
+    for (long k = 0; k < h_in; k++) {
+        const double *r = d->hrbuf + (size_t)k * SPRING_REC;
+        int s = dem_hash_insert(&d->extra, dem_pair_key((int)r[0], (int)r[1]));
+        if (d->extra.row[s] < 0) { /* a pair sent by both its grains' ranks holds the same spring */
+            d->extra.row[s] = (int)k;
+            memcpy(d->extra_val + 3 * (size_t)k, r + 2, 3 * sizeof *r);
+        }
+    }
+    /* 5. ghosts: the owned grains of the first column to rank - 1, of the
+     * last to rank + 1 (any slot order: both sides sort them the same) */
+    const int lo_rank = d->rank > 0 ? d->rank - 1 : MPI_PROC_NULL;
+    const int hi_rank = d->rank + 1 < d->size ? d->rank + 1 : MPI_PROC_NULL;
+    int n_ghost[2] = {0, 0}; /* from lo_rank, hi_rank */
+    const int n_owned = g->n;
+    for (int side = 0; side < 2; side++) {
+        const int col = side == 0 ? d->col_lo : d->col_hi - 1;
+        const int to = side == 0 ? lo_rank : hi_rank, from = side == 0 ? hi_rank : lo_rank;
+        int ns = 0, nr = 0;
+        for (int i = 0; i < n_owned; i++)
+            if (dem_grid_column(gd, g->x[i]) == col)
+                d->order[ns++] = i;
+        if (to == MPI_PROC_NULL)
+            ns = 0;
+        if ((rc = MPI_Sendrecv(&ns, 1, MPI_INT, to, 1, &nr, 1, MPI_INT, from, 1, d->comm, MPI_STATUS_IGNORE)) !=
+            MPI_SUCCESS)
+            return mpi_fail(err, rc, "sendrecv of the ghost counts", w->step);
+        if (g->n + nr > g->cap)
+            return cm_fail(err, CM_ERR_RANGE, "step %ld: rank %d would hold %d grains with its ghosts, more than "
+                           "max_grains = %d", w->step, d->rank, g->n + nr, g->cap);
+        if (grow(&d->sbuf, &d->sbuf_cap, (size_t)ns * rs) || grow(&d->rbuf, &d->rbuf_cap, (size_t)nr * rs))
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d ghosts", w->step, ns + nr);
+        for (int k = 0; k < ns; k++)
+            pack_grain(w, d->order[k], d->sbuf + (size_t)k * rs);
+        if ((rc = MPI_Sendrecv(d->sbuf, ns * (int)rs, MPI_DOUBLE, to, 2, d->rbuf, nr * (int)rs, MPI_DOUBLE, from, 2,
+                               d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+            return mpi_fail(err, rc, "sendrecv of the ghosts", w->step);
+        for (int k = 0; k < nr; k++)
+            unpack_grain(w, g->n++, d->rbuf + (size_t)k * rs);
+        n_ghost[side == 0 ? 1 : 0] = nr; /* side 0 receives from hi_rank */
+        if (side == 0)
+            d->n_send_lo = ns;
+        else
+            d->n_send_hi = ns;
+    }
+    /* 6. the neighbour list on the global grid: the sort puts the ghosts of
+     * rank - 1 first and those of rank + 1 last */
+    w->n_frozen = 0;
+    for (int i = 0; i < g->n; i++) {
+        g->id[i] = i, g->slot_of[i] = i;
+        w->n_frozen += g->frozen[i];
+    }
+    w->own_lo = n_ghost[0];
+    w->own_hi = g->n - n_ghost[1];
+    w->hist_extra = &d->extra;
+    w->hist_extra_val = d->extra_val;
+    const double t1 = cm_now();
+    w->prof.migrate += t1 - t0;
+    rc = dem_neighbour_rebuild(w, err);
+    w->hist_extra = NULL;
+    w->hist_extra_val = NULL;
+    return rc;
+}
+
+/* 9 doubles per grain: position, velocity, angular velocity. */
+enum { HALO_REC = 9 };
+
+static void pack_state(const dem_grains *g, int lo, int n, double *b)
+{
+    const double *a[HALO_REC] = {g->x, g->y, g->z, g->vx, g->vy, g->vz, g->wx, g->wy, g->wz};
+    for (int k = 0; k < HALO_REC && n > 0; k++) /* no buffer yet before the first rebuild */
+        memcpy(b + (size_t)k * n, a[k] + lo, (size_t)n * sizeof *b);
+}
+
+static void unpack_state(dem_grains *g, int lo, int n, const double *b)
+{
+    double *a[HALO_REC] = {g->x, g->y, g->z, g->vx, g->vy, g->vz, g->wx, g->wy, g->wz};
+    for (int k = 0; k < HALO_REC && n > 0; k++)
+        memcpy(a[k] + lo, b + (size_t)k * n, (size_t)n * sizeof *b);
+}
+
+static int dist_halo(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    dem_grains *g = &w->g;
+    const int lo_rank = d->rank > 0 ? d->rank - 1 : MPI_PROC_NULL;
+    const int hi_rank = d->rank + 1 < d->size ? d->rank + 1 : MPI_PROC_NULL;
+    const int n_lo = w->own_lo, n_hi = g->n - w->own_hi; /* ghosts from rank - 1, rank + 1 */
+    /* the buffers were sized for these counts at the rebuild (whole records) */
+    double *sb = d->sbuf, *rb = d->rbuf;
+    int rc;
+    /* to rank - 1 the first owned grains, from rank + 1 the last ghosts */
+    pack_state(g, w->own_lo, d->n_send_lo, sb);
+    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_lo, MPI_DOUBLE, lo_rank, 3, rb, HALO_REC * n_hi, MPI_DOUBLE,
+                           hi_rank, 3, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "sendrecv of the ghost states", w->step);
+    unpack_state(g, w->own_hi, n_hi, rb);
+    pack_state(g, w->own_hi - d->n_send_hi, d->n_send_hi, sb);
+    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_hi, MPI_DOUBLE, hi_rank, 4, rb, HALO_REC * n_lo, MPI_DOUBLE,
+                           lo_rank, 4, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "sendrecv of the ghost states", w->step);
+    unpack_state(g, 0, n_lo, rb);
+    return CM_OK;
+}
+
+static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    double v[2] = {*maxd2, *bad ? 1.0 : 0.0};
+    int rc = MPI_Allreduce(MPI_IN_PLACE, v, 2, MPI_DOUBLE, MPI_MAX, d->comm);
+    if (rc != MPI_SUCCESS)
+        return mpi_fail(err, rc, "allreduce of the displacement", w->step);
+    *maxd2 = v[0];
+    *bad = v[1] != 0.0;
+    return CM_OK;
+}
+
+static void ctx_free(dist_ctx *d);
+
+static void dist_release(dem_world *w)
+{
+    ctx_free(w->dist_ctx);
+    w->dist = NULL;
+    w->dist_ctx = NULL;
+}
+
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release};
+
+static void ctx_free(dist_ctx *d)
+{
+    if (!d)
+        return;
+    free(d->bounds);
+    free(d->cols);
+    free(d->dest);
+    free(d->scount);
+    free(d->sbuf);
+    free(d->rbuf);
+    free(d->hsbuf);
+    free(d->hrbuf);
+    dem_hash_free(&d->extra);
+    free(d->extra_val);
+    free(d->order);
+    free(d);
+}
+
+int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
+{
+    int rank, size, rc;
+    MPI_Comm_rank(comm, &rank);
+    MPI_Comm_size(comm, &size);
+    if (w->def.reorder_every != 1)
+        return cm_fail(err, CM_ERR_KEY, "dem.reorder_every = %d: a distributed run needs 1 (the global grain order)",
+                       w->def.reorder_every);
+    if (w->surf || w->n_shaped > 0)
+        return cm_fail(err, CM_ERR_STATE, "a distributed world holds spheres and walls only (no triangle surface, "
+                       "no shaped grains) for now");
+    /* walls from rank 0 */
+    int nw = w->n_walls;
+    if ((rc = MPI_Bcast(&nw, 1, MPI_INT, 0, comm)) != MPI_SUCCESS ||
+        (rc = MPI_Bcast(w->walls, (int)(nw * sizeof(dem_wall)), MPI_BYTE, 0, comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "broadcast of the walls", w->step);
+    w->n_walls = nw;
+    /* radii, skin and the time-step check over every grain (rank 0's): what
+     * the first step would do, done now so that every rank is prepared */
+    int prc = w->prepared && rank == 0 ? CM_OK : dem_world_prepare(w, err), all = 0;
+    MPI_Allreduce(&prc, &all, 1, MPI_INT, MPI_MAX, comm);
+    if (prc)
+        return prc;
+    if (all)
+        return cm_fail(err, CM_ERR_STATE, "another rank could not prepare the world");
+    /* rank 0 goes on as a world of its own until its next neighbour rebuild,
+     * which distributes the grains (so its bits do not change at attach) */
+    double rr[4] = {w->r_min, w->r_max, w->skin, w->need_rebuild};
+    if ((rc = MPI_Bcast(rr, 4, MPI_DOUBLE, 0, comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "broadcast of the radii", w->step);
+    w->r_min = rr[0], w->r_max = rr[1], w->skin = rr[2], w->need_rebuild = rr[3] != 0.0;
+    if (rank > 0 && w->g.n > 0)
+        return cm_fail(err, CM_ERR_STATE, "rank %d: only rank 0's world may hold grains at attach (%d here)", rank,
+                       w->g.n);
+    dist_ctx *d = calloc(1, sizeof *d);
+    if (!d)
+        return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory");
+    d->comm = comm, d->rank = rank, d->size = size;
+    d->bounds = calloc((size_t)size + 1, sizeof *d->bounds);
+    d->scount = calloc(9 * (size_t)size, sizeof *d->scount);
+    d->dest = calloc((size_t)w->g.cap, sizeof *d->dest);
+    d->order = calloc((size_t)w->g.cap, sizeof *d->order);
+    if (!d->bounds || !d->scount || !d->dest || !d->order) {
+        ctx_free(d);
+        return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory");
+    }
+    d->sdispl = d->scount + size, d->rcount = d->scount + 2 * size, d->rdispl = d->scount + 3 * size;
+    d->hcount = d->scount + 4 * size, d->hdispl = d->scount + 5 * size, d->hrcount = d->scount + 6 * size;
+    d->hrdispl = d->scount + 7 * size, d->hwhere = d->scount + 8 * size;
+    w->dist = &dist_ops;
+    w->dist_ctx = d;
+    w->own_lo = 0, w->own_hi = w->g.n; /* all on rank 0 until the first rebuild */
+    return CM_OK;
+}
+
+void dem_mpi_detach(dem_world *w)
+{
+    if (!w->dist)
+        return;
+    dist_release(w);
+    w->need_rebuild = 1;
+}
+
+void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s)
+{
+    memset(s, 0, sizeof *s);
+    const dist_ctx *d = w->dist_ctx;
+    s->owned = w->dist ? w->own_hi - w->own_lo : w->g.n;
+    s->ghosts = w->g.n - s->owned;
+    s->ranks = 1;
+    if (!d)
+        return;
+    s->rank = d->rank, s->ranks = d->size;
+    s->col_lo = d->col_lo, s->col_hi = d->col_hi;
+    s->migrated = d->migrated;
+    s->scattered = d->scattered;
+    s->springs_sent = d->springs_sent;
+    s->cross_pairs = w->n_cross_pairs;
+}
+
+static int by_tag(const void *a, const void *b)
+{
+    double x = ((const double *)a)[9], y = ((const double *)b)[9];
+    return (x > y) - (x < y);
+}
+
+int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err)
+{
+    const dist_ctx *d = w->dist_ctx;
+    if (!d) {
+        *hash = dem_world_hash(w);
+        return CM_OK;
+    }
+    enum { H = 11 }; /* dem_world_hash's values per grain: x, v, w, tag, frozen */
+    const dem_grains *g = &w->g;
+    int n = w->own_hi - w->own_lo, rc;
+    int *counts = NULL, *displ = NULL, total = 0;
+    double *mine = malloc(((size_t)n * H + 1) * sizeof *mine), *all = NULL;
+    if (d->rank == 0) {
+        counts = calloc(2 * (size_t)d->size, sizeof *counts);
+        displ = counts ? counts + d->size : NULL;
+    }
+    int ok = mine && (d->rank != 0 || counts);
+    for (int k = 0; ok && k < n; k++) {
+        int i = w->own_lo + k;
+        double v[H] = {g->x[i], g->y[i], g->z[i], g->vx[i], g->vy[i], g->vz[i], g->wx[i], g->wy[i], g->wz[i],
+                       (double)g->tag[i], (double)g->frozen[i]};
+        memcpy(mine + (size_t)k * H, v, sizeof v);
+    }
+    int cnt = n * H;
+    rc = MPI_Gather(&cnt, 1, MPI_INT, counts, 1, MPI_INT, 0, d->comm);
+    if (rc == MPI_SUCCESS && d->rank == 0 && counts) {
+        for (int r = 0; r < d->size; r++)
+            displ[r] = total, total += counts[r];
+        all = malloc(((size_t)total + 1) * sizeof *all);
+        ok = ok && all;
+    }
+    if (rc == MPI_SUCCESS)
+        rc = MPI_Gatherv(mine, cnt, MPI_DOUBLE, all, counts, displ, MPI_DOUBLE, 0, d->comm);
+    uint64_t h = 1469598103934665603ULL;
+    if (rc == MPI_SUCCESS && d->rank == 0 && all) {
+        qsort(all, (size_t)total / H, H * sizeof *all, by_tag);
+        for (int k = 0; k < total / H; k++) {
+            const unsigned char *b = (const unsigned char *)(all + (size_t)k * H);
+            for (size_t c = 0; c < H * sizeof(double); c++) {
+                h ^= b[c];
+                h *= 1099511628211ULL;
+            }
+        }
+    }
+    free(mine);
+    free(all);
+    free(counts);
+    if (rc != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the state", w->step);
+    int okall = 0;
+    MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
+    if (!okall)
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory gathering the state", w->step);
+    MPI_Bcast(&h, 1, MPI_UINT64_T, 0, d->comm);
+    *hash = h;
+    return CM_OK;
+}
+
+static const int *g_sort_tags; /* qsort's comparison of slots by tag (rank 0, one gather at a time) */
+
+static int slot_by_tag(const void *a, const void *b)
+{
+    int x = g_sort_tags[*(const int *)a], y = g_sort_tags[*(const int *)b];
+    return (x > y) - (x < y);
+}
+
+int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_gather: the world is not distributed");
+    const size_t rs = rec_size(w);
+    const int n = w->own_hi - w->own_lo;
+    int rc, ok = 1, total = 0;
+    int counts[2] = {n, w->contacts_gw}, sums[2] = {0, 0};
+    if ((rc = MPI_Reduce(counts, sums, 2, MPI_INT, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "reduce of the grain counts", w->step);
+    total = sums[0];
+    if (d->rank == 0)
+        ok = view && total <= view->g.cap && !grow(&d->rbuf, &d->rbuf_cap, (size_t)total * rs);
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs))
+        ok = 0;
+    int okall = 0;
+    MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
+    if (!okall)
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to gather %d grains on rank 0 (max_grains %d)", w->step,
+                       total, view ? view->g.cap : 0);
+    for (int k = 0; k < n; k++)
+        pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
+    int cnt = n * (int)rs;
+    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grain counts", w->step);
+    if (d->rank == 0) {
+        d->rdispl[0] = 0;
+        for (int r = 1; r < d->size; r++)
+            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
+    }
+    if ((rc = MPI_Gatherv(d->sbuf, cnt, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
+        MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grains", w->step);
+    if (d->rank != 0)
+        return CM_OK;
+    /* rank order is the global order: the slabs follow each other along x */
+    view->n_walls = w->n_walls;
+    memcpy(view->walls, w->walls, sizeof w->walls);
+    view->wall_stride = w->wall_stride;
+    view->g.n = total;
+    view->n_frozen = 0;
+    for (int k = 0; k < total; k++) {
+        unpack_grain(view, k, d->rbuf + (size_t)k * rs);
+        view->n_frozen += view->g.frozen[k];
+        d->order[k] = k;
+    }
+    g_sort_tags = view->g.tag;
+    qsort(d->order, (size_t)total, sizeof *d->order, slot_by_tag);
+    for (int id = 0; id < total; id++)
+        view->g.id[d->order[id]] = id, view->g.slot_of[id] = d->order[id];
+    view->time = w->time, view->step = w->step;
+    view->r_min = w->r_min, view->r_max = w->r_max, view->skin = w->skin;
+    view->contacts_gw = sums[1];
+    view->prepared = 1;
+    view->def.reorder_every = 0; /* keep the gathered order */
+    return dem_neighbour_rebuild(view, err);
+}

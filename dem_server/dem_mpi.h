@@ -1,0 +1,70 @@
+/* A world distributed over the ranks of an MPI communicator: slabs along x
+ * (the travel direction) whose boundaries are cell boundaries of the global
+ * neighbour grid, chosen from the grain counts at every neighbour rebuild;
+ * ghosts (copies of the neighbouring slabs' grains within one cell) refreshed
+ * every step; owned grains migrate with their springs at rebuilds.
+ *
+ * Same bits for any number of ranks: every rank holds its grains (owned and
+ * ghosts) in the global order (cell with x slowest, tag inside a cell;
+ * dem_grid.c), so its pair list is the global list restricted to the pairs
+ * with an owned grain, in the same order, and each owned grain adds the same
+ * pairs' forces in the same order as one process does. A pair owned–ghost is
+ * computed on both ranks, from the same data and spring. Only owned grains
+ * are integrated.
+ *
+ * Internal to dem_server (the server and the tests); MPI stays out of the
+ * `dem` library: the step calls the stages through w->dist (dem_world.h).
+ * Phase 1: spheres, walls, gravity and frozen grains; no triangle surface,
+ * no shaped grains, no grains added or removed while distributed. */
+#ifndef DEM_MPI_H
+#define DEM_MPI_H
+
+#include <mpi.h>
+#include <stdint.h>
+
+#include "dem.h"
+
+/* Distributes the world over comm (collective). Every rank passes a world
+ * made with the same definition and materials; rank 0's holds the grains
+ * and walls (the others' none). Walls are broadcast, the world prepared
+ * (radii, skin and the time-step check over every grain), and the grains go
+ * to their slabs at the next neighbour rebuild (rank 0 steps them alone
+ * until then, as a world of its own would: attaching changes no bits).
+ * Needs reorder_every = 1. */
+int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err);
+/* Frees the distribution (the world keeps this rank's grains and is no
+ * longer stepped in step with the others); dem_world_destroy does it too. */
+void dem_mpi_detach(dem_world *w);
+
+typedef struct dem_mpi_stats {
+    int rank, ranks;
+    int owned, ghosts;   /* grains integrated here, copies of the neighbours' */
+    int col_lo, col_hi;  /* this rank's slab: cell columns [col_lo, col_hi) of the global grid */
+    long scattered;      /* grains rank 0 sent to the others at the first rebuild */
+    long migrated;       /* grains this rank sent to another at later rebuilds */
+    long springs_sent;   /* contact springs sent with them */
+    long cross_pairs;    /* pairs owned–ghost in the current list */
+} dem_mpi_stats;
+void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s);
+
+/* dem_world_hash of the whole distributed world (every rank's owned grains
+ * in tag order: the value one process computes for the same state), on
+ * every rank (collective). */
+int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err);
+
+/* The whole world on rank 0, for its outputs (collective): every rank's
+ * owned grains into `view` (rank 0's; a world made with the same definition
+ * and materials, NULL elsewhere) in the global order, ids in tag order as one
+ * process numbers them, walls, clock and wall-contact count copied, and a
+ * neighbour list of its own (no re-sort), so that dem_output_frame writes
+ * what one process writes for the same state. */
+int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err);
+
+/* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
+ * each at least one column, split so that the grain counts count[c] are as
+ * even as whole columns allow (rank r's slab starts at the first column
+ * where the running count reaches r/ranks of the total). CM_ERR_RANGE when
+ * there are fewer columns than ranks. */
+int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err);
+
+#endif

@@ -1009,6 +1009,45 @@ static int rim_reaction_balances_loads(void)
     return 0;
 }
 
+/* The 0.2 m box of 4 x 2 x 2 cells of the exchange tests below. */
+static fem_config small_box_config(void)
+{
+    fem_config c = fem_config_default();
+    c.mesh = FEM_MESH_BOX;
+    c.box_size[0] = 0.2;
+    c.box_cells[0] = 4;
+    c.box_cells[1] = c.box_cells[2] = 2;
+    return c;
+}
+
+/* That box without pressure or gravity, stepping at `fraction` of its
+ * explicit limit (*h), after its static solve. */
+static int small_box_stepping(double fraction, fem_model **m, double *h)
+{
+    fem_config c = small_box_config();
+    c.pressure = 0.0;
+    c.gravity[2] = 0.0;
+    cm_error err = {0};
+    ENSURE(fem_create(&c, m, &err) == CM_OK);
+    fem_stability st;
+    ENSURE(fem_get_stability(*m, &st) == CM_OK);
+    *h = fraction * st.dt_limit;
+    fem_destroy(m);
+    c.dt = *h;
+    ENSURE(fem_create(&c, m, &err) == CM_OK);
+    ENSURE(fem_solve_static(*m, &err) == CM_OK);
+    return 0;
+}
+
+/* The heaviest interface node: away from the clamped rim. */
+static uint32_t heaviest_node(const double *mass, uint32_t nn)
+{
+    uint32_t k = 0;
+    for (uint32_t i = 1; i < nn; i++)
+        k = mass[i] > mass[k] ? i : k;
+    return k;
+}
+
 /* A load held over an interval acts from the interval's start (central
  * differences: m (u+ - 2u + u-) / h^2 = f(t) - K u). From rest, one sub-step
  * h under a force P on one node moves it by h^2 P / (2 m) (u = a t^2 / 2;
@@ -1017,32 +1056,18 @@ static int rim_reaction_balances_loads(void)
  * 0, the force acted one sub-step late. */
 static int step_load_from_interval_start(void)
 {
-    fem_config c = fem_config_default();
-    c.mesh = FEM_MESH_BOX;
-    c.box_size[0] = 0.2;
-    c.box_cells[0] = 4;
-    c.box_cells[1] = c.box_cells[2] = 2;
-    c.pressure = 0.0;
-    c.gravity[2] = 0.0;
     fem_model *m;
+    double h;
+    if (small_box_stepping(0.5, &m, &h))
+        return 1;
     cm_error err = {0};
-    ENSURE(fem_create(&c, &m, &err) == CM_OK);
-    fem_stability st;
-    ENSURE(fem_get_stability(m, &st) == CM_OK);
-    double h = 0.5 * st.dt_limit;
-    fem_destroy(&m);
-    c.dt = h;
-    ENSURE(fem_create(&c, &m, &err) == CM_OK);
-    ENSURE(fem_solve_static(m, &err) == CM_OK);
     uint32_t nn;
     fem_interface_count(m, &nn, NULL);
     double *f = calloc(3 * nn, sizeof *f), *mass = calloc(nn, sizeof *mass), *x0 = calloc(3 * nn, sizeof *x0),
            *x1 = calloc(3 * nn, sizeof *x1);
     ENSURE(f && mass && x0 && x1);
     fem_interface_masses(m, mass);
-    uint32_t k = 0; /* the heaviest free interface node: away from the clamped rim */
-    for (uint32_t i = 1; i < nn; i++)
-        k = mass[i] > mass[k] ? i : k;
+    uint32_t k = heaviest_node(mass, nn);
     ENSURE(mass[k] > 0.0);
     const double P = 3.0;
     f[3 * k + 2] = P;
@@ -1076,31 +1101,17 @@ static int step_load_from_interval_start(void)
  * fix: within [0.990, 1.013] of the start. */
 static int staggered_contact_spring(void)
 {
-    fem_config c = fem_config_default();
-    c.mesh = FEM_MESH_BOX;
-    c.box_size[0] = 0.2;
-    c.box_cells[0] = 4;
-    c.box_cells[1] = c.box_cells[2] = 2;
-    c.pressure = 0.0;
-    c.gravity[2] = 0.0;
     fem_model *m;
+    double h;
+    if (small_box_stepping(0.25, &m, &h))
+        return 1;
     cm_error err = {0};
-    ENSURE(fem_create(&c, &m, &err) == CM_OK);
-    fem_stability st;
-    ENSURE(fem_get_stability(m, &st) == CM_OK);
-    double h = 0.25 * st.dt_limit;
-    fem_destroy(&m);
-    c.dt = h;
-    ENSURE(fem_create(&c, &m, &err) == CM_OK);
-    ENSURE(fem_solve_static(m, &err) == CM_OK);
     uint32_t nn;
     fem_interface_count(m, &nn, NULL);
     double *f = calloc(3 * nn, sizeof *f), *mass = calloc(nn, sizeof *mass), *x = calloc(3 * nn, sizeof *x);
     ENSURE(f && mass && x);
     fem_interface_masses(m, mass);
-    uint32_t k = 0;
-    for (uint32_t i = 1; i < nn; i++)
-        k = mass[i] > mass[k] ? i : k;
+    uint32_t k = heaviest_node(mass, nn);
     /* a stiff contact: k / m = 0.05 / h^2, pre-stretched by d along z */
     const double kc = 0.05 * mass[k] / (h * h), d = 1e-4;
     fem_interface_state(m, x, NULL);
@@ -1176,11 +1187,7 @@ static int subcycling(void)
  * naming the key, and the key reads from a scene. */
 static int interface_mass_scaling(void)
 {
-    fem_config c = fem_config_default();
-    c.mesh = FEM_MESH_BOX;
-    c.box_size[0] = 0.2;
-    c.box_cells[0] = 4;
-    c.box_cells[1] = c.box_cells[2] = 2;
+    fem_config c = small_box_config();
     fem_model *a, *b;
     cm_error err = {0};
     ENSURE(fem_create(&c, &a, &err) == CM_OK);

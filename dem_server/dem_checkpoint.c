@@ -55,28 +55,11 @@ static void visit_window(cm_ckpt *ck, dem_window *win)
         dem_window_set_state(win, &st);
 }
 
-/* Reading: room for n_pairs pairs and a history table of cap slots. */
+/* Reading: room for n_pairs pairs. */
 static void reserve_pairs(cm_ckpt *ck, dem_world *w, int n_pairs)
 {
-    if (ck->writing || ck->rc != CM_OK || n_pairs <= w->pair_cap)
-        return;
-    int *a = realloc(w->pi, (size_t)n_pairs * sizeof *a), *b = a ? realloc(w->pj, (size_t)n_pairs * sizeof *b) : NULL;
-    if (a)
-        w->pi = a;
-    if (b)
-        w->pj = b;
-    for (int k = 0; k < 2 && b; k++) {
-        double *h = realloc(w->hist_val[k], (size_t)n_pairs * 3 * sizeof *h);
-        if (!h) {
-            b = NULL;
-            break;
-        }
-        w->hist_val[k] = h;
-    }
-    if (!b)
+    if (!ck->writing && ck->rc == CM_OK && dem_pairs_reserve(w, n_pairs))
         ck->rc = cm_fail(ck->err, CM_ERR_NOMEM, "%s: out of memory for %d pairs", ck->path, n_pairs);
-    else
-        w->pair_cap = n_pairs;
 }
 
 static void reserve_hash(cm_ckpt *ck, dem_hash *h, int cap)
@@ -186,7 +169,7 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
         hash_rows(ck, h, cap);
         cm_ckpt_f64(ck, "/pairs/springs", w->hist_val[w->hist_cur], 3 * (size_t)w->n_pairs);
         if (!ck->writing && ck->rc == CM_OK) /* which way each spring points: from the pairs read */
-            ck->rc = dem_hist_orient(w, ck->err);
+            dem_hist_orient(w);
     }
     cm_ckpt_double(ck, "/pairs/skin", &w->skin);
     cm_ckpt_int(ck, "/pairs/need_rebuild", &w->need_rebuild);

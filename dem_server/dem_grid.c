@@ -21,7 +21,7 @@
 
 /* ---- neighbour list ---------------------------------------------------- */
 
-static int grow_pairs(dem_world *w, int need)
+int dem_pairs_reserve(dem_world *w, int need)
 {
     if (need <= w->pair_cap)
         return CM_OK;
@@ -41,6 +41,10 @@ static int grow_pairs(dem_world *w, int need)
         if (!h)
             return CM_ERR_NOMEM;
         w->hist_val[k] = h;
+        unsigned char *o = realloc(w->hist_ori[k], (size_t)cap);
+        if (!o)
+            return CM_ERR_NOMEM;
+        w->hist_ori[k] = o;
     }
     w->pair_cap = cap;
     return CM_OK;
@@ -147,32 +151,11 @@ static int grid_build(dem_world *w, dem_grid_dims *gd)
     return CM_OK;
 }
 
-/* Room for n orientations in both tables (kept). */
-static int grow_ori(dem_world *w, int n)
+void dem_hist_orient(dem_world *w)
 {
-    if (n <= w->hist_ori_cap)
-        return CM_OK;
-    int c = w->hist_ori_cap ? w->hist_ori_cap : 1024;
-    while (c < n)
-        c *= 2;
-    for (int k = 0; k < 2; k++) {
-        unsigned char *o = realloc(w->hist_ori[k], (size_t)c);
-        if (!o)
-            return CM_ERR_NOMEM;
-        w->hist_ori[k] = o;
-    }
-    w->hist_ori_cap = c;
-    return CM_OK;
-}
-
-int dem_hist_orient(dem_world *w, cm_error *err)
-{
-    if (grow_ori(w, w->n_pairs))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step, w->n_pairs);
     const int *tag = w->g.tag;
     for (int p = 0; p < w->n_pairs; p++)
         w->hist_ori[w->hist_cur][p] = tag[w->pi[p]] < tag[w->pj[p]];
-    return CM_OK;
 }
 
 int dem_neighbour_rebuild(dem_world *w, cm_error *err)
@@ -225,7 +208,7 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
                         double cut = ri + g->r[j];
                         if (ex * ex + ey * ey + ez * ez >= cut * cut)
                             continue;
-                        if (w->n_pairs == w->pair_cap && grow_pairs(w, w->n_pairs + 1))
+                        if (w->n_pairs == w->pair_cap && dem_pairs_reserve(w, w->n_pairs + 1))
                             return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step,
                                            w->n_pairs + 1);
                         w->pi[w->n_pairs] = i;
@@ -263,7 +246,7 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     dem_hash *old = &w->hist[w->hist_cur], *nw = &w->hist[1 - w->hist_cur];
     const double *oval = w->hist_val[w->hist_cur];
     double *nval = w->hist_val[1 - w->hist_cur];
-    if (dem_hash_reset(nw, w->n_pairs) || grow_ori(w, w->n_pairs))
+    if (dem_hash_reset(nw, w->n_pairs))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     const unsigned char *oori = w->hist_ori[w->hist_cur];
     unsigned char *nori = w->hist_ori[1 - w->hist_cur];

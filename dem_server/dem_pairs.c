@@ -24,10 +24,6 @@
 #include "dem_world.h"
 #include "vec3.h"
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 /* The arrays the narrow phase reads, copied into a local struct so that
  * their pointers stay in registers. */
 typedef struct pair_arrays {
@@ -492,11 +488,7 @@ static int stage_pairs_shaped(dem_world *w)
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
     {
-#ifdef _OPENMP
-        int tid = omp_get_thread_num();
-#else
-        int tid = 0;
-#endif
+        int tid = dem_thread_id();
         int lo = (int)((long)np * tid / nt), hi = (int)((long)np * (tid + 1) / nt);
         force_sums s = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
         if (tid > 0) {

@@ -25,20 +25,7 @@
 #include "timer.h"
 #include "vec3.h"
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 /* ---- the step ---------------------------------------------------------- */
-
-static inline int thread_id(void)
-{
-#ifdef _OPENMP
-    return omp_get_thread_num();
-#else
-    return 0;
-#endif
-}
 
 /* Gravity and walls for grain slots [lo, hi); wall forces into wf. Inlined
  * twice with `shaped` constant: the sphere-only instance is the original
@@ -138,7 +125,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
     {
-        int tid = thread_id();
+        int tid = dem_thread_id();
         int lo = g0 + (int)((long)n * tid / nt), hi = g0 + (int)((long)n * (tid + 1) / nt);
         double(*wf)[3] = w->tb[tid].wall_f;
         contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
@@ -268,7 +255,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
 #endif
         {
-            int tid = thread_id();
+            int tid = dem_thread_id();
             double m2;
             const long no = n - g0;
             int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2,

@@ -10,10 +10,6 @@
 #include "log.h"
 #include "vec3.h"
 
-#ifdef _OPENMP
-#include <omp.h>
-#endif
-
 int dem_closest_on_triangle(const double p[3], const double a[3], const double b[3], const double c[3],
                             double bary[3], double cp[3])
 {
@@ -891,11 +887,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
 #pragma omp parallel num_threads(nt)
 #endif
     {
-#ifdef _OPENMP
-        int tid = omp_get_thread_num();
-#else
-        int tid = 0;
-#endif
+        int tid = dem_thread_id();
         int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
         surf_scratch *sc = &s->scratch[tid];
         if (!use_lists) {

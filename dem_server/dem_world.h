@@ -12,6 +12,20 @@
 #include "dem_shape.h"
 #include "dem_surface.h"
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* The calling thread's number in its OpenMP team (0 without OpenMP). */
+static inline int dem_thread_id(void)
+{
+#ifdef _OPENMP
+    return omp_get_thread_num();
+#else
+    return 0;
+#endif
+}
+
 _Static_assert(DEM_MAX_WALLS <= 32, "dem_grains.wall_mask holds one bit per wall");
 
 typedef struct dem_wall {
@@ -135,7 +149,6 @@ struct dem_world {
      * spring is the displacement of i relative to j: when a re-sort swaps a
      * pair's order it is carried over negated */
     unsigned char *hist_ori[2];
-    int hist_ori_cap;
     double skin;
     int need_rebuild;
     /* cell grid */
@@ -209,9 +222,12 @@ static inline int dem_grow_ints(int **a, int *cap, int need)
  * (also after grains or walls changed), and the neighbour list. */
 int dem_world_prepare(dem_world *w, cm_error *err);
 int dem_neighbour_rebuild(dem_world *w, cm_error *err);
+/* Room for `need` pairs: pi, pj and both history tables (springs and
+ * orientations) grow together, doubling; kept contents. CM_ERR_NOMEM. */
+int dem_pairs_reserve(dem_world *w, int need);
 /* The orientations of the current list's springs (hist_ori) from its pairs'
  * tags, after the list was read back (a checkpoint). */
-int dem_hist_orient(dem_world *w, cm_error *err);
+void dem_hist_orient(dem_world *w);
 /* The grid over the box [lo, hi] for cells >= h and n_grains grains (coarser
  * when a few grains far away would make it huge), and a position's cell
  * column along x: every rank computes the same from the same global box. */

@@ -31,11 +31,12 @@ static int cmp_state_x(const void *a, const void *b)
     return (xa > xb) - (xa < xb);
 }
 
-/* Index of the wall with unit normal n (within 1e-9), or -1. */
-static int find_wall(const dem_world *w, double nx, double ny)
+/* Index of the wall with unit normal (nx, ny, nz) (within 1e-9), or -1. */
+static int find_wall(const dem_world *w, double nx, double ny, double nz)
 {
     for (int k = 0; k < w->n_walls; k++)
-        if (fabs(w->walls[k].n[0] - nx) < 1e-9 && fabs(w->walls[k].n[1] - ny) < 1e-9 && fabs(w->walls[k].n[2]) < 1e-9)
+        if (fabs(w->walls[k].n[0] - nx) < 1e-9 && fabs(w->walls[k].n[1] - ny) < 1e-9 &&
+            fabs(w->walls[k].n[2] - nz) < 1e-9)
             return k;
     return -1;
 }
@@ -44,7 +45,7 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
 {
     *out = NULL;
     const dem_grains *g = &w->g;
-    int kb = find_wall(w, 1, 0), kf = find_wall(w, -1, 0);
+    int kb = find_wall(w, 1, 0, 0), kf = find_wall(w, -1, 0, 0);
     if (kb < 0 || kf < 0)
         return cm_fail(err, CM_ERR_STATE, "dem.window: the bed has no end walls (normals +x and -x); set "
                        "dem.bed.side_walls = true");
@@ -112,7 +113,7 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
     double h = 2.0 * win->r_max, tops = 0.0;
     int ncol = 0;
     for (double cx = 0.0; cx < len; cx += h)
-        for (double cy = g->n ? w->walls[find_wall(w, 0, 1) >= 0 ? find_wall(w, 0, 1) : 0].p[1] : 0.0;; cy += h) {
+        for (double cy = g->n ? w->walls[find_wall(w, 0, 1, 0) >= 0 ? find_wall(w, 0, 1, 0) : 0].p[1] : 0.0;; cy += h) {
             double top = -INFINITY;
             int any = 0;
             for (int q = 0; q < n; q++) {
@@ -120,7 +121,7 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
                 if (st->x[0] >= cx && st->x[0] < cx + h && st->x[1] >= cy && st->x[1] < cy + h)
                     top = fmax(top, st->x[2] + st->radius), any = 1;
             }
-            int ky = find_wall(w, 0, -1);
+            int ky = find_wall(w, 0, -1, 0);
             if (any)
                 tops += top, ncol++;
             if (ky < 0 || cy + h >= w->walls[ky].p[1])
@@ -371,7 +372,7 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
         ahead = def->ahead, behind = def->behind;
         k_ahead = "dem.window.ahead", k_behind = "dem.window.behind";
     } else {
-        int kb = find_wall(w, 1, 0), kf = find_wall(w, -1, 0);
+        int kb = find_wall(w, 1, 0, 0), kf = find_wall(w, -1, 0, 0);
         ahead = kf >= 0 ? w->walls[kf].p[0] - wheel_x : INFINITY;
         behind = kb >= 0 ? wheel_x - w->walls[kb].p[0] : INFINITY;
         k_ahead = "dem.bed.box_max[0] (or a dem.window)", k_behind = "wheel.center[0] or dem.bed.box_min[0]";
@@ -392,7 +393,7 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
                     behind, lc, k_behind);
         warnings |= DEM_FOOTPRINT_BEHIND;
     }
-    int ky0 = find_wall(w, 0, 1), ky1 = find_wall(w, 0, -1);
+    int ky0 = find_wall(w, 0, 1, 0), ky1 = find_wall(w, 0, -1, 0);
     double left = ky0 >= 0 ? lo[1] - w->walls[ky0].p[1] : INFINITY;
     double right = ky1 >= 0 ? w->walls[ky1].p[1] - hi[1] : INFINITY;
     if (fmin(left, right) < 0.5 * b) {
@@ -407,19 +408,14 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
      * 1 - 2^(-3/2) = 65 % of the contact pressure, so a rigid floor nearer
      * than a (a circle of the footprint's area lc x b) carries the wheel
      * rather than the soil, and it stiffens the bed. */
-    for (int k = 0; k < w->n_walls; k++) {
-        const dem_wall *fl = &w->walls[k];
-        if (!(fabs(fl->n[2] - 1.0) < 1e-9))
-            continue;
-        double depth = dem_bed_height(w) - fl->p[2] - z, a = sqrt(lc * b / M_PI);
-        if (depth < a) {
-            cm_log_warn("the soil under the tire is %.3f m deep at %.1f mm sinkage, less than the footprint's "
-                        "equivalent radius %.3f m: the floor bears %.0f %% of the contact pressure there (Boussinesq) "
-                        "and stiffens the bed; deepen the bed (dem.bed.layers)",
-                        depth, 1e3 * z, a, 100.0 * (1.0 - pow(1.0 + a * a / fmax(depth * depth, 1e-12), -1.5)));
-            warnings |= DEM_FOOTPRINT_FLOOR;
-        }
-        break;
+    int kz = find_wall(w, 0, 0, 1);
+    double depth = kz >= 0 ? dem_bed_height(w) - w->walls[kz].p[2] - z : INFINITY, a = sqrt(lc * b / M_PI);
+    if (depth < a) {
+        cm_log_warn("the soil under the tire is %.3f m deep at %.1f mm sinkage, less than the footprint's "
+                    "equivalent radius %.3f m: the floor bears %.0f %% of the contact pressure there (Boussinesq) "
+                    "and stiffens the bed; deepen the bed (dem.bed.layers)",
+                    depth, 1e3 * z, a, 100.0 * (1.0 - pow(1.0 + a * a / fmax(depth * depth, 1e-12), -1.5)));
+        warnings |= DEM_FOOTPRINT_FLOOR;
     }
     if (win && win->def.freeze_distance > 0 && win->def.freeze_distance < 2.0 * lc) {
         cm_log_warn("dem.window.freeze_distance = %.3f m is shorter than 2 contact lengths (%.3f m): the frozen soil "

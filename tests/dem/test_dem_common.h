@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "dem.h"
+#include "dem_bed.h"
 #include "hertz.h"
 #include "test.h"
 
@@ -63,6 +64,29 @@ static inline void test_plane_mesh(int nx, int ny, double s, double x0, double y
             }
             t++;
         }
+}
+
+/* An open box L x B (floor and four side walls, material 0) with n grains
+ * placed, not settled, in two layers (radii 2.2-2.6 mm below, 1.8-2.0 mm
+ * above): the falling beds of the thread and rank tests. */
+static inline int test_two_layer_box(dem_world *w, double L, double B, int n)
+{
+    cm_error err = {0};
+    const double walls[5][6] = {{0, 0, 0, 0, 0, 1}, {0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0},
+                                {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
+    for (int k = 0; k < 5; k++)
+        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    dem_bed_params p = dem_bed_params_default();
+    double lo[3] = {0, 0, 0}, hi[3] = {L, B, 0.2};
+    memcpy(p.box_min, lo, sizeof lo);
+    memcpy(p.box_max, hi, sizeof hi);
+    p.n_layers = 2;
+    p.layers[0].count = n / 2;
+    p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
+    p.layers[1].count = n - n / 2;
+    p.layers[1].radius[0] = 1.8e-3, p.layers[1].radius[1] = 2.0e-3;
+    ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
+    return 0;
 }
 
 #endif

@@ -39,20 +39,7 @@ static int make_world(int with_grains, dem_world **out)
     if (!with_grains)
         return 0;
     const double L = 0.16, B = 0.04;
-    const double walls[5][6] = {{0, 0, 0, 0, 0, 1}, {0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0},
-                                {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
-    for (int k = 0; k < 5; k++)
-        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
-    dem_bed_params p = dem_bed_params_default();
-    double lo[3] = {0, 0, 0}, hi[3] = {L, B, 0.2};
-    memcpy(p.box_min, lo, sizeof lo);
-    memcpy(p.box_max, hi, sizeof hi);
-    p.n_layers = 2;
-    p.layers[0].count = N_GRAINS / 2;
-    p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
-    p.layers[1].count = N_GRAINS - N_GRAINS / 2;
-    p.layers[1].radius[0] = 1.8e-3, p.layers[1].radius[1] = 2.0e-3;
-    ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
+    ENSURE(test_two_layer_box(w, L, B, N_GRAINS) == 0);
     /* sideways stir, so that grains cross the slab boundaries */
     for (int id = 0; id < dem_grain_count(w); id++) {
         double v[3] = {0.5 * sin(1.3 * id), 0.2 * cos(1.7 * id), -0.2}, om[3] = {30 * cos(id), 0, 10 * sin(3 * id)};

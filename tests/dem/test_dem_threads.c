@@ -42,20 +42,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     dem_world *w = NULL;
     cm_error err = {0};
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
-    dem_bed_params p = dem_bed_params_default();
-    double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.04, 0.2};
-    memcpy(p.box_min, lo, sizeof lo);
-    memcpy(p.box_max, hi, sizeof hi);
-    p.n_layers = 2;
-    p.layers[0].count = n / 2;
-    p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
-    p.layers[1].count = n - n / 2;
-    p.layers[1].radius[0] = 1.8e-3, p.layers[1].radius[1] = 2.0e-3;
-    const double walls[5][6] = {{0, 0, 0, 0, 0, 1},    {0, 0, 0, 1, 0, 0},    {0.04, 0, 0, -1, 0, 0},
-                                {0, 0, 0, 0, 1, 0},    {0, 0.04, 0, 0, -1, 0}};
-    for (int k = 0; k < 5; k++)
-        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
-    ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
+    ENSURE(test_two_layer_box(w, 0.04, 0.04, n) == 0);
     if (c.surface) { /* a tilted triangulated plane 5 mm above the floor */
         const int nx = nx_surf;
         const double s = 0.05 / nx;

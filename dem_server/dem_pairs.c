@@ -392,20 +392,34 @@ static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_
 
 /* ---- the stage --------------------------------------------------------- */
 
-/* A pair in contact joins the batch; a full batch is computed and added. */
-static inline __attribute__((always_inline)) void batch_push(const pair_arrays *a, const force_sums *s,
-                                                             const coef_table *ct, batch_fn batch_forces,
-                                                             pair_batch *b, int p, int i, int j, double ex,
-                                                             double ey, double ez, double d2)
+/* Candidate pair p (slots i, j) through the contact test, without a branch
+ * on its outcome (in a settled bed about half the candidates touch, a coin
+ * a branch predictor cannot call): the pair is written into the batch's next
+ * place, which is taken only if the grains overlap; a full batch is computed
+ * and added. A pair apart whose spring still holds something has it cleared
+ * (rare: the pair just separated). Coincident centres (no normal) count as
+ * apart. Returns 1 in contact. */
+static inline __attribute__((always_inline)) int candidate(const pair_arrays *a, const force_sums *s,
+                                                            const coef_table *ct, batch_fn batch_forces,
+                                                            pair_batch *b, int p)
 {
-    int k = b->n++;
+    const int i = a->pi[p], j = a->pj[p];
+    const double ex = a->x[i] - a->x[j], ey = a->y[i] - a->y[j], ez = a->z[i] - a->z[j];
+    const double d2 = ex * ex + ey * ey + ez * ez, rs = a->r[i] + a->r[j];
+    const int apart = (d2 >= rs * rs) | (d2 == 0.0);
+    double *xi = a->hist + 3 * (size_t)p;
+    if (apart & ((xi[0] != 0.0) | (xi[1] != 0.0) | (xi[2] != 0.0)))
+        xi[0] = xi[1] = xi[2] = 0.0;
+    const int k = b->n;
     b->p[k] = p, b->i[k] = i, b->j[k] = j, b->c[k] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
     b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
+    b->n = k + !apart;
     if (b->n == BATCH) {
         batch_forces(a, ct, b);
         batch_scatter(a, s, b);
         b->n = 0;
     }
+    return !apart;
 }
 
 static inline void batch_flush(const pair_arrays *a, const force_sums *s, const coef_table *ct,
@@ -418,26 +432,39 @@ static inline void batch_flush(const pair_arrays *a, const force_sums *s, const 
     }
 }
 
+/* One thread: every active pair in ascending p (the plain loop). */
+static int walk_all(const pair_arrays *in, const force_sums *s, const coef_table *ct, batch_fn batch_forces, int np)
+{
+    const pair_arrays a = *in;
+    pair_batch b;
+    b.n = 0;
+    int contacts = 0;
+    for (int p = 0; p < np; p++)
+        contacts += candidate(&a, s, ct, batch_forces, &b, p);
+    batch_flush(&a, s, ct, batch_forces, &b);
+    return contacts;
+}
+
 /* The pairs of block t in ascending p, merged with the cross pairs arriving
- * at its grains as j (phase B); pl NULL: one thread, every active pair.
+ * at its grains as j (phase B).
  * Pairs in contact go through batches; a stored cross contribution first
  * flushes the batch, so that each grain still adds in ascending p. Returns
  * the contacts of the block's own pairs. */
 static int walk_block(const pair_arrays *in, const force_sums *s, const coef_table *ct, batch_fn batch_forces,
-                      const dem_pair_plan *pl, int t, int np)
+                      const dem_pair_plan *pl, int t)
 {
     const pair_arrays a = *in;
-    const int *own = pl ? pl->own : NULL, *cross = pl ? pl->cross : NULL, *inc = pl ? pl->in : NULL;
-    int k = pl ? pl->own_start[t] : 0, ke = pl ? pl->own_start[t + 1] : np;
-    int cc = pl ? pl->cross_start[t] : 0, ce = pl ? pl->cross_start[t + 1] : 0;
-    int m = pl ? pl->in_start[t] : 0, me = pl ? pl->in_start[t + 1] : 0;
+    const int *own = pl->own, *cross = pl->cross, *inc = pl->in;
+    int k = pl->own_start[t], ke = pl->own_start[t + 1];
+    int cc = pl->cross_start[t], ce = pl->cross_start[t + 1];
+    int m = pl->in_start[t], me = pl->in_start[t + 1];
     pair_batch b;
     b.n = 0;
     int contacts = 0;
     /* the next stored event (own cross pair or arriving one) by p */
     int p_cc = cc < ce ? cross[cc] : INT_MAX, p_in = m < me ? cross[inc[m]] : INT_MAX;
     for (; k < ke || m < me;) {
-        int p = k < ke ? (own ? own[k] : k) : INT_MAX;
+        int p = k < ke ? own[k] : INT_MAX;
         if (p_in < p) { /* a cross pair arriving at its j */
             batch_flush(&a, s, ct, batch_forces, &b);
             int c = inc[m++];
@@ -457,17 +484,7 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const coef_tab
             p_cc = cc < ce ? cross[cc] : INT_MAX;
             continue;
         }
-        int i = a.pi[p], j = a.pj[p];
-        double ex = a.x[i] - a.x[j], ey = a.y[i] - a.y[j], ez = a.z[i] - a.z[j];
-        double d2 = ex * ex + ey * ey + ez * ez, rs = a.r[i] + a.r[j];
-        if (d2 >= rs * rs || d2 == 0.0) { /* apart (or coincident centres: no normal) */
-            double *xi = a.hist + 3 * (size_t)p;
-            if (xi[0] != 0.0 || xi[1] != 0.0 || xi[2] != 0.0)
-                xi[0] = xi[1] = xi[2] = 0.0;
-            continue;
-        }
-        contacts++;
-        batch_push(&a, s, ct, batch_forces, &b, p, i, j, ex, ey, ez, d2);
+        contacts += candidate(&a, s, ct, batch_forces, &b, p);
     }
     batch_flush(&a, s, ct, batch_forces, &b);
     return contacts;
@@ -535,7 +552,7 @@ int dem_stage_pairs(dem_world *w)
     coef_table_fill(w, &ct);
     const batch_fn bf = batch_kernel(w);
     if (nt == 1)
-        return walk_block(&a, &s, &ct, bf, NULL, 0, w->n_active_pairs);
+        return walk_all(&a, &s, &ct, bf, w->n_active_pairs);
     const dem_pair_plan *pl = &w->plan;
     const int nb = pl->n_blocks;
     int contacts = 0;
@@ -555,7 +572,7 @@ int dem_stage_pairs(dem_world *w)
 #pragma omp for schedule(dynamic, 1) nowait
 #endif
         for (int t = 0; t < nb; t++) /* phase B */
-            contacts += walk_block(&a, &s, &ct, bf, pl, t, 0);
+            contacts += walk_block(&a, &s, &ct, bf, pl, t);
     }
     return contacts;
 }

@@ -260,7 +260,8 @@ static void coef_table_fill(const dem_world *w, coef_table *t)
 }
 
 static inline __attribute__((always_inline)) void batch_forces_body(const pair_arrays *in, const coef_table *ct,
-                                                                     pair_batch *b, const int rolling)
+                                                                     pair_batch *b, const int rolling,
+                                                                     const int uniform)
 {
     const double *restrict r = in->r, *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
     const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
@@ -277,7 +278,9 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
     const int n = b->n;
 #pragma omp simd
     for (int k = 0; k < n; k++) {
-        const int i = bi[k], j = bj[k], c = bc[k], p3 = 3 * bp[k];
+        /* uniform: one material pair in the batch, its coefficients loaded
+         * once for all lanes instead of gathered lane by lane */
+        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k], p3 = 3 * bp[k];
         const double ex = bex[k], ey = bey[k], ez = bez[k];
         const double ri = r[i], rj = r[j], rs = ri + rj;
         double d = sqrt(bd2[k]);
@@ -345,23 +348,42 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
     }
 }
 
+/* 1 if every pair of the batch has the same material pair (a bed of one
+ * soil: always). */
+static inline int batch_uniform(const pair_batch *b)
+{
+    int same = 1;
+    for (int k = 1; k < b->n; k++)
+        same &= b->c[k] == b->c[0];
+    return same;
+}
+
+/* The four instances of the loop: with or without rolling resistance, one
+ * material pair or several. */
+#define BATCH_FORCES_DISPATCH(in, ct, b)                                                                           \
+    do {                                                                                                           \
+        if (batch_uniform(b)) {                                                                                    \
+            if ((ct)->rolling)                                                                                     \
+                batch_forces_body(in, ct, b, 1, 1);                                                                \
+            else                                                                                                   \
+                batch_forces_body(in, ct, b, 0, 1);                                                                \
+        } else if ((ct)->rolling)                                                                                  \
+            batch_forces_body(in, ct, b, 1, 0);                                                                    \
+        else                                                                                                       \
+            batch_forces_body(in, ct, b, 0, 0);                                                                    \
+    } while (0)
+
 #if defined(__x86_64__) && defined(__GNUC__)
 __attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays *in, const coef_table *ct,
                                                                pair_batch *b)
 {
-    if (ct->rolling)
-        batch_forces_body(in, ct, b, 1);
-    else
-        batch_forces_body(in, ct, b, 0);
+    BATCH_FORCES_DISPATCH(in, ct, b);
 }
 #endif
 
 static void batch_forces_portable(const pair_arrays *in, const coef_table *ct, pair_batch *b)
 {
-    if (ct->rolling)
-        batch_forces_body(in, ct, b, 1);
-    else
-        batch_forces_body(in, ct, b, 0);
+    BATCH_FORCES_DISPATCH(in, ct, b);
 }
 
 typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);

@@ -118,21 +118,33 @@ typedef struct pair {
     char shm[64], out[260], fem_log[300], dem_log[300];
 } pair;
 
-/* Both servers on the test's scene, results in out. */
-static int pair_start(pair *p, const char *out)
+/* Both servers on the test scene, with `--set set` when set is not NULL
+ * (recorded in OUT/scene.sets as the launcher records it). */
+static int pair_start_set(pair *p, const char *out, const char *set)
 {
     static int count;
+    if (strlen(out) >= sizeof p->out)
+        return -1;
     snprintf(p->shm, sizeof p->shm, "/demfem-restart-%d-%d", (int)getpid(), count++);
     snprintf(p->out, sizeof p->out, "%s", out);
     snprintf(p->fem_log, sizeof p->fem_log, "%s.fem.log", out);
     snprintf(p->dem_log, sizeof p->dem_log, "%s.dem.log", out);
     mkdir(out, 0755);
-    const char *fa[] = {FEM_SERVER, "--scene", g_scene, "--shm", p->shm, "--out", out, NULL};
-    const char *da[] = {DEM_SERVER, "--scene", g_scene, "--shm", p->shm, "--out", out, NULL};
+    const char *fa[] = {FEM_SERVER, "--scene", g_scene, "--shm", p->shm, "--out", out, set ? "--set" : NULL, set, NULL};
+    const char *da[] = {DEM_SERVER, "--scene", g_scene, "--shm", p->shm, "--out", out, set ? "--set" : NULL, set, NULL};
+    if (set) {
+        char path[320];
+        snprintf(path, sizeof path, "%s/scene.sets", out);
+        FILE *f = fopen(path, "w");
+        if (!f || fprintf(f, "%s\n", set) < 0 || fclose(f) != 0)
+            return -1;
+    }
     p->fem = spawn(fa, p->fem_log);
     p->dem = spawn(da, p->dem_log);
     return p->fem > 0 && p->dem > 0 ? 0 : -1;
 }
+
+static int pair_start(pair *p, const char *out) { return pair_start_set(p, out, NULL); }
 
 /* Waits until the run has written `rows` rows of traction.csv (or ended). */
 static int wait_rows(const pair *p, long rows, double timeout_s)
@@ -632,7 +644,10 @@ static int missing_mesh_file(void)
 
 /* The terrain window's state (grains removed and appended, end walls moved,
  * tags, frozen grains, the window's own counters) survives a checkpoint, and
- * a run resumed with another DEM thread count ends bit for bit the same. */
+ * a run resumed with another DEM thread count ends bit for bit the same.
+ * The interrupted run had an override of its own (restating the scene's
+ * exchange_every): `./run --resume DIR --set dem.threads=2` must keep it,
+ * or the servers refuse the checkpoint as another scene. */
 static int window_resume_bit_exact(void)
 {
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
@@ -648,7 +663,8 @@ static int window_resume_bit_exact(void)
     pair p;
     char out[300];
     snprintf(out, sizeof out, "%s/interrupted", g_dir);
-    ENSURE(pair_start(&p, out) == 0);
+    ENSURE(file_text(g_scene, text, sizeof text) == 0 && strstr(text, "exchange_every = 2;"));
+    ENSURE(pair_start_set(&p, out, "coupling.exchange_every=2") == 0);
     ENSURE(wait_rows(&p, 500, 60) == 0);
     kill(p.fem, SIGTERM);
     int fem_rc = wait_exit(p.fem, 20), dem_rc = wait_exit(p.dem, 20);

@@ -27,31 +27,43 @@
 
 /* ---- the step ---------------------------------------------------------- */
 
-/* Gravity and walls for grain slots [lo, hi); wall forces into wf. Inlined
- * twice with `shaped` constant: the sphere-only instance is the original
- * loop, without a shape test. */
+/* Gravity (eq. 1) as the first term of every sum, torques zero, for grain
+ * slots [lo, hi): a loop of its own, which vectorises. */
+static void gravity_range(dem_grains *g, int lo, int hi, const double grav[3])
+{
+    double *restrict fx = g->fx, *restrict fy = g->fy, *restrict fz = g->fz;
+    double *restrict tx = g->tx, *restrict ty = g->ty, *restrict tz = g->tz;
+    const double *restrict inv_m = g->inv_m;
+    const double gx = grav[0], gy = grav[1], gz = grav[2];
+#pragma omp simd
+    for (int i = lo; i < hi; i++) {
+        double m = 1.0 / inv_m[i];
+        fx[i] = m * gx, fy[i] = m * gy, fz[i] = m * gz;
+        tx[i] = ty[i] = tz[i] = 0.0;
+    }
+}
+
+/* Walls for grain slots [lo, hi), added after gravity; wall forces into wf.
+ * Inlined twice with `shaped` constant: the sphere-only instance is the
+ * original loop, without a shape test. */
 static inline __attribute__((always_inline)) int walls_range(dem_world *w, int lo, int hi, double (*wf)[3],
                                                              const int shaped)
 {
     dem_grains *g = &w->g;
     const int nw = w->n_walls;
     const double dt = w->def.dt;
-    const vec3 grav = v3_load(w->def.gravity);
     const int near_valid = w->walls_near_valid;
     const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
     int contacts = 0;
     for (int i = lo; i < hi; i++) {
-        double m = 1.0 / g->inv_m[i];
-        /* gravity, eq. 1 */
-        g->fx[i] = m * grav.x, g->fy[i] = m * grav.y, g->fz[i] = m * grav.z;
-        g->tx[i] = g->ty[i] = g->tz[i] = 0.0;
-        if (g->frozen[i]) /* stays put: its wall springs wait unchanged */
-            continue;
-        double r = g->r[i];
         uint32_t mask = g->wall_mask[i];
         /* the walls within reach (and any still holding a spring), in
          * ascending order as the loop over all walls would take them */
         uint32_t todo = near_valid ? g->wall_near[i] | mask : all;
+        if (!todo || g->frozen[i]) /* a frozen grain stays put: its wall springs wait unchanged */
+            continue;
+        double r = g->r[i];
+        double m = 1.0 / g->inv_m[i];
         while (todo) {
             int k = __builtin_ctz(todo);
             todo &= todo - 1;
@@ -128,6 +140,7 @@ int dem_step_surface(dem_world *w, cm_error *err)
         int tid = dem_thread_id();
         int lo = g0 + (int)((long)n * tid / nt), hi = g0 + (int)((long)n * (tid + 1) / nt);
         double(*wf)[3] = w->tb[tid].wall_f;
+        gravity_range(g, lo, hi, w->def.gravity);
         contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
     }
     for (int k = 0; k < nw; k++) {

@@ -40,6 +40,9 @@ typedef struct dist_ctx {
     size_t sbuf_cap, rbuf_cap;
     double *hsbuf, *hrbuf;     /* spring records: tag, tag, 3 doubles */
     size_t hsbuf_cap, hrbuf_cap;
+    double *psbuf, *prbuf;     /* packed surface contacts: this rank's, every rank's (rank 0) */
+    size_t psbuf_cap, prbuf_cap;
+    long surf_contacts, surf_gathers, surf_doubles;
     dem_hash extra;            /* received springs, by tag pair */
     double *extra_val;
     size_t extra_cap;
@@ -48,7 +51,13 @@ typedef struct dist_ctx {
 
 enum { REC_FIXED = 39, SPRING_REC = 5 };
 
-static size_t rec_size(const dem_world *w) { return REC_FIXED + 3 * (size_t)w->wall_stride; }
+/* surface history per grain (dem_surface.h), after the wall springs */
+enum { SURF_HIST = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE };
+
+static size_t rec_size(const dem_world *w)
+{
+    return REC_FIXED + 3 * (size_t)w->wall_stride + (w->surf ? SURF_HIST : 0);
+}
 
 /* Everything a grain carries, as doubles (integers exactly). */
 static void pack_grain(const dem_world *w, int i, double *r)
@@ -63,6 +72,9 @@ static void pack_grain(const dem_world *w, int i, double *r)
         g->tag[i],   g->frozen[i], g->shape[i], g->wall_mask[i], g->surf_count[i], g->wall_near[i]};
     memcpy(r, v, sizeof v);
     memcpy(r + REC_FIXED, g->wall_hist + (size_t)i * 3 * w->wall_stride, 3 * (size_t)w->wall_stride * sizeof *r);
+    if (w->surf) /* the tangential springs against the tire travel with the grain */
+        memcpy(r + REC_FIXED + 3 * (size_t)w->wall_stride, w->surf->hist + (size_t)i * SURF_HIST,
+               SURF_HIST * sizeof *r);
 }
 
 static void unpack_grain(dem_world *w, int i, const double *r)
@@ -81,6 +93,9 @@ static void unpack_grain(dem_world *w, int i, const double *r)
     g->shape[i] = (int)r[35], g->wall_mask[i] = (uint32_t)r[36], g->surf_count[i] = (int)r[37];
     g->wall_near[i] = (uint32_t)r[38];
     memcpy(g->wall_hist + (size_t)i * 3 * w->wall_stride, r + REC_FIXED, 3 * (size_t)w->wall_stride * sizeof *r);
+    if (w->surf) /* a gathered view without a surface skips them */
+        memcpy(w->surf->hist + (size_t)i * SURF_HIST, r + REC_FIXED + 3 * (size_t)w->wall_stride,
+               SURF_HIST * sizeof *r);
 }
 
 static int grow(double **a, size_t *cap, size_t need)
@@ -404,6 +419,55 @@ static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
     return CM_OK;
 }
 
+/* Stage "surf_gather", after every surface pass: the ranks' contacts
+ * (dem_surface_pack: in slot order, owned grains only) gathered on rank 0
+ * in rank order, which is the global grain order (the slabs are contiguous
+ * ranges of it), and summed there as one process sums its own
+ * (dem_surface_sum_packed): the node forces sent to fem_server are the same
+ * bits for any number of ranks. Each rank keeps its own largest overlap
+ * (and its grain) for the health check: the largest over the ranks is the
+ * one process's. */
+static int dist_surf_gather(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    dem_surface *s = w->surf;
+    const double t0 = cm_now();
+    const long n = dem_surface_packed_size(w);
+    int rc;
+    if (n > INT_MAX || grow(&d->psbuf, &d->psbuf_cap, (size_t)n + 1))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to pack %ld doubles of surface contacts", w->step, n);
+    dem_surface_pack(w, d->psbuf);
+    d->surf_contacts += s->tot.contacts;
+    int cnt = (int)n;
+    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the surface contact counts", w->step);
+    long total = 0;
+    if (d->rank == 0) {
+        for (int r = 0; r < d->size; r++)
+            total += d->rcount[r];
+        if (total > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)total + 1))
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step,
+                           total);
+        d->rdispl[0] = 0;
+        for (int r = 1; r < d->size; r++)
+            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
+    }
+    if ((rc = MPI_Gatherv(d->psbuf, cnt, MPI_DOUBLE, d->prbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
+        MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the surface contacts", w->step);
+    if (d->rank == 0) {
+        const double max_overlap = s->tot.max_overlap;
+        const int worst_grain = s->tot.worst_grain, worst_tri = s->tot.worst_tri;
+        if ((rc = dem_surface_sum_packed(w, d->prbuf, total, err)))
+            return rc;
+        s->tot.max_overlap = max_overlap, s->tot.worst_grain = worst_grain, s->tot.worst_tri = worst_tri;
+        d->surf_doubles += total;
+    }
+    d->surf_gathers++;
+    w->prof.surf_gather += cm_now() - t0;
+    return CM_OK;
+}
+
 static void ctx_free(dist_ctx *d);
 
 static void dist_release(dem_world *w)
@@ -413,7 +477,7 @@ static void dist_release(dem_world *w)
     w->dist_ctx = NULL;
 }
 
-static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release};
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release, dist_surf_gather};
 
 static void ctx_free(dist_ctx *d)
 {
@@ -427,6 +491,8 @@ static void ctx_free(dist_ctx *d)
     free(d->rbuf);
     free(d->hsbuf);
     free(d->hrbuf);
+    free(d->psbuf);
+    free(d->prbuf);
     dem_hash_free(&d->extra);
     free(d->extra_val);
     free(d->order);
@@ -441,9 +507,14 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
     if (w->def.reorder_every != 1)
         return cm_fail(err, CM_ERR_KEY, "dem.reorder_every = %d: a distributed run needs 1 (the global grain order)",
                        w->def.reorder_every);
-    if (w->surf || w->n_shaped > 0)
-        return cm_fail(err, CM_ERR_STATE, "a distributed world holds spheres and walls only (no triangle surface, "
-                       "no shaped grains) for now");
+    if (w->n_shaped > 0)
+        return cm_fail(err, CM_ERR_STATE, "a distributed world holds spheres only (no shaped grains) for now");
+    /* every rank or none holds the surface (installed before attaching) */
+    int has_surf = w->surf != NULL, surf_all[2] = {0, 0}, mine[2] = {has_surf, -has_surf};
+    MPI_Allreduce(mine, surf_all, 2, MPI_INT, MPI_MIN, comm);
+    if (surf_all[0] != -surf_all[1])
+        return cm_fail(err, CM_ERR_STATE, "rank %d: the triangle surface must be installed on every rank before "
+                       "dem_mpi_attach (or on none)", rank);
     /* walls from rank 0 */
     int nw = w->n_walls;
     if ((rc = MPI_Bcast(&nw, 1, MPI_INT, 0, comm)) != MPI_SUCCESS ||
@@ -511,6 +582,21 @@ void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s)
     s->scattered = d->scattered;
     s->springs_sent = d->springs_sent;
     s->cross_pairs = w->n_cross_pairs;
+    s->surf_contacts = d->surf_contacts;
+    s->surf_gathers = d->surf_gathers;
+    s->surf_doubles = d->surf_doubles;
+}
+
+int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err)
+{
+    for (size_t at = 0; at < bytes;) { /* counts are ints: pieces of at most 1 GiB */
+        size_t k = bytes - at < ((size_t)1 << 30) ? bytes - at : (size_t)1 << 30;
+        int rc = MPI_Bcast((char *)buf + at, (int)k, MPI_BYTE, 0, comm);
+        if (rc != MPI_SUCCESS)
+            return mpi_fail(err, rc, "broadcast from rank 0", -1);
+        at += k;
+    }
+    return CM_OK;
 }
 
 static int by_tag(const void *a, const void *b)

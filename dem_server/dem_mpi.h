@@ -14,8 +14,10 @@
  *
  * Internal to dem_server (the server and the tests); MPI stays out of the
  * `dem` library: the step calls the stages through w->dist (dem_world.h).
- * Phase 1: spheres, walls, gravity and frozen grains; no triangle surface,
- * no shaped grains, no grains added or removed while distributed. */
+ * Spheres, walls, gravity, frozen grains and the tire's triangle surface
+ * (installed on every rank before attaching; each rank's contacts summed on
+ * rank 0 in the global grain order, stage surf_gather); no shaped grains,
+ * no grains added or removed while distributed. */
 #ifndef DEM_MPI_H
 #define DEM_MPI_H
 
@@ -44,6 +46,9 @@ typedef struct dem_mpi_stats {
     long migrated;       /* grains this rank sent to another at later rebuilds */
     long springs_sent;   /* contact springs sent with them */
     long cross_pairs;    /* pairs owned–ghost in the current list */
+    long surf_contacts;  /* grain–surface contacts of this rank's grains, summed over the steps */
+    long surf_gathers;   /* surface passes gathered */
+    long surf_doubles;   /* rank 0: doubles of packed contacts it received, summed over the passes */
 } dem_mpi_stats;
 void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s);
 
@@ -59,6 +64,9 @@ int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err);
  * neighbour list of its own (no re-sort), so that dem_output_frame writes
  * what one process writes for the same state. */
 int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err);
+
+/* `bytes` of buf from rank 0 to every rank of comm (collective). */
+int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err);
 
 /* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
  * each at least one column, split so that the grain counts count[c] are as

@@ -194,7 +194,36 @@ int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *e
  * on the other ranks from rank 0 (stage surf_bcast). */
 typedef struct reply {
     double kind, flags, wheel_x, stop_requested;
+    double window, freeze_lo, freeze_hi; /* distributed: what the window does (dem_window_pending) */
 } reply;
+
+/* The terrain window after an exchange. Distributed, rank 0 alone holds the
+ * window and said what it does: freezing is done by every rank on its own
+ * grains (the rebuild flag agreed), a shift (removal, appended stretch) on
+ * the whole world gathered on rank 0, as one process does it. */
+static int window_update(coupled *c, const dem_coupled_def *def, const reply *in, cm_error *err)
+{
+    const dem_coupled_dist *dist = def->dist;
+    dem_world *w = c->w;
+    int rc = CM_OK;
+    if (!dist)
+        return def->window && isfinite(in->wheel_x) ? dem_window_update(def->window, w, in->wheel_x, err) : CM_OK;
+    if (in->window == DEM_WINDOW_FREEZE) {
+        if (def->window)
+            rc = dem_window_update(def->window, w, in->wheel_x, err);
+        else
+            dem_freeze_outside_x(w, in->freeze_lo, in->freeze_hi);
+        return rc ? rc : dist->agree_rebuild(w, dist->user, err);
+    }
+    if (in->window == DEM_WINDOW_SHIFT) {
+        if ((rc = dist->collect(w, dist->user, err)))
+            return rc;
+        if (def->window && (rc = dem_window_update(def->window, w, in->wheel_x, err)))
+            return rc; /* dem_server stops the other ranks (MPI_Abort) */
+        return dist->rejoin(w, dist->user, err);
+    }
+    return CM_OK;
+}
 
 /* Distributed: the surface as fem_server sent it at the handshake, from
  * rank 0 to every rank (node and triangle counts, triangles, positions,
@@ -312,6 +341,8 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             /* After our own request the run ends whether or not the peer
              * checkpointed (a FEM side without checkpoints ignores it). */
             in.stop_requested = stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
+            if (dist && def->window && head->kind == IPC_FRAME_DATA && isfinite(in.wheel_x))
+                in.window = dem_window_pending(def->window, in.wheel_x, &in.freeze_lo, &in.freeze_hi);
             if (head->kind == IPC_FRAME_DATA) {
                 memcpy(c.x, q, m * sizeof *c.x);
                 memcpy(c.v, q + m, m * sizeof *c.v);
@@ -328,7 +359,6 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             prof.bcast_bytes += (double)(sizeof in + (in.kind == IPC_FRAME_DATA ? 2 * m * sizeof *c.x : 0));
         lap(&t_lap, &prof.bcast);
         const uint32_t kind = (uint32_t)in.kind, flags = (uint32_t)in.flags;
-        const double wheel_x = in.wheel_x;
         stop_requested = in.stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)
             break;
@@ -340,7 +370,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             goto done;
         time += interval;
         /* between two steps: grains at x(t), the next force sum starts after */
-        if (def->window && isfinite(wheel_x) && (rc = dem_window_update(def->window, w, wheel_x, err)))
+        if ((rc = window_update(&c, def, &in, err)))
             goto done;
         lap(&t_lap, &prof.update);
 

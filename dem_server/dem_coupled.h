@@ -36,6 +36,12 @@ typedef struct dem_coupled_dist {
     int (*attach)(dem_world *w, void *user, cm_error *err);
     /* the whole world's dem_world_hash, on every rank (collective) */
     int (*hash)(dem_world *w, uint64_t *hash, void *user, cm_error *err);
+    /* the terrain window (collective, dem_mpi.h): the world gathered on rank
+     * 0 (which alone holds the window) and spread again after its update;
+     * the rebuild flag agreed after every rank froze its grains */
+    int (*collect)(dem_world *w, void *user, cm_error *err);
+    int (*rejoin)(dem_world *w, void *user, cm_error *err);
+    int (*agree_rebuild)(dem_world *w, void *user, cm_error *err);
     void *user;
 } dem_coupled_dist;
 
@@ -58,8 +64,8 @@ typedef struct dem_coupled_def {
     dem_window *window;     /* terrain window moved with the wheel every exchange (NULL = none) */
     dem_window_def window_def; /* its keys (also the footprint check's expected sinkage without a window) */
     dem_coupled_profile *profile; /* out: where the time went (may be NULL) */
-    const dem_coupled_dist *dist; /* NULL: one process. Distributed: no terrain window, no checkpoints yet;
-                                     ch (dem_run_coupled) only on rank 0, NULL elsewhere */
+    const dem_coupled_dist *dist; /* NULL: one process. Distributed: no checkpoints yet; ch (dem_run_coupled)
+                                     and window only on rank 0, NULL elsewhere */
 } dem_coupled_def;
 
 /* The coupled loop's own state, saved in checkpoints besides the world's. */

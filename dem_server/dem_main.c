@@ -207,6 +207,24 @@ static int coupled_hash(dem_world *w, uint64_t *hash, void *user, cm_error *err)
     (void)user;
     return dem_mpi_hash(w, hash, err);
 }
+
+static int coupled_collect(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_collect(w, err);
+}
+
+static int coupled_rejoin(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_rejoin(w, err);
+}
+
+static int coupled_agree_rebuild(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_agree_rebuild(w, err);
+}
 #endif
 
 static int write_checkpoint(dem_world *w, const dem_coupled_state *st, void *user, cm_error *err)
@@ -359,10 +377,9 @@ static int run(const options *o)
         cfg.world.threads = o->threads;
     ensure_passive_waiting(o, cfg.world.threads);
     mpi_start(); /* after the re-execution above */
-    if (g_ranks > 1 && !o->standalone && (o->resume || cfg.window.enabled)) {
-        rc = cm_fail(&err, CM_ERR_STATE, "dem_server on %d MPI ranks: %s not distributed yet (issue 17, phase 2); "
-                     "run it on one rank", g_ranks, o->resume ? "resuming from a checkpoint is" :
-                     "the terrain window (dem.window) is");
+    if (g_ranks > 1 && o->resume) {
+        rc = cm_fail(&err, CM_ERR_STATE, "dem_server on %d MPI ranks: resuming from a checkpoint is not distributed "
+                     "yet (issue 17); resume on one rank", g_ranks);
         goto fail;
     }
     if (o->out)
@@ -502,7 +519,9 @@ static int run(const options *o)
         def.interrupt = &g_sig->interrupt;
 #ifdef DEMFEM_MPI
         const dem_coupled_dist dist = {.rank = g_rank, .ranks = g_ranks, .bcast = coupled_bcast,
-                                       .attach = coupled_attach, .hash = coupled_hash, .user = &octx};
+                                       .attach = coupled_attach, .hash = coupled_hash, .collect = coupled_collect,
+                                       .rejoin = coupled_rejoin, .agree_rebuild = coupled_agree_rebuild,
+                                       .user = &octx};
         if (g_ranks > 1) {
             def.dist = &dist;
             octx.distributed = 1;
@@ -553,8 +572,8 @@ static int run(const options *o)
                         ms.migrated, s.profile.halo, s.profile.migrate);
             if (!o->standalone)
                 cm_log_info("rank %d of %d: %ld surface contacts over %ld passes; surf_gather %.2f s, surf_bcast "
-                            "%.2f s", g_rank, g_ranks, ms.surf_contacts, ms.surf_gathers, s.profile.surf_gather,
-                            cprof.bcast);
+                            "%.2f s; %ld window shifts collected", g_rank, g_ranks, ms.surf_contacts,
+                            ms.surf_gathers, s.profile.surf_gather, cprof.bcast, ms.collects);
             if (!o->standalone && g_rank == 0 && ms.surf_gathers > 0 && cprof.exchanges > 0)
                 cm_log_info("MPI traffic of the surface: %.0f bytes broadcast per exchange, %.0f bytes of contacts "
                             "gathered on rank 0 per DEM step (mean)", cprof.bcast_bytes / (double)cprof.exchanges,

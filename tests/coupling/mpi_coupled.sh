@@ -1,23 +1,26 @@
 #!/usr/bin/env bash
 # The coupled tire with its DEM side over MPI ranks (issue 17, phase 2):
-# tests/coupling/scenes/tire_small.cfg, shortened to END s, run through
-# ./run by one plain dem_server and by `./run --ranks 2` and `--ranks 3`
-# (oversubscribed next to fem_server on two cores). Every run must end in
-# the same dem_world_hash and fem_state_hash and write the same result
-# files: traction.csv, summary.json, fem_series.csv and the run records
-# byte for byte, every dataset of dem_grains.h5 (the ranks' grains gathered
-# on rank 0), wheel.h5 and fem.h5 byte for byte. dem_series.csv is left out:
-# a distributed run writes its initial row only (dem_server/README.md).
+# tests/coupling/scenes/tire_window.cfg (tire_small with a terrain window
+# that removes grains behind, appends a stretch in front and freezes and
+# thaws grains as the wheel travels) for END s, run through ./run by one
+# plain dem_server and by `./run --ranks 2` and `--ranks 3` (oversubscribed
+# next to fem_server on two cores). Every run must end in the same
+# dem_world_hash and fem_state_hash and write the same result files:
+# traction.csv, summary.json, fem_series.csv and the run records byte for
+# byte, every dataset of dem_grains.h5 (the ranks' grains gathered on rank
+# 0), wheel.h5 and fem.h5 byte for byte. dem_series.csv is left out: a
+# distributed run writes its initial row only (dem_server/README.md).
 # So that the test could fail, the distributed runs must have moved grains
-# between ranks and found surface contacts on more than one rank.
+# between ranks, found surface contacts on more than one rank, and shifted
+# the window (a removal and an appended stretch) while distributed.
 # Usage: mpi_coupled.sh SOURCE_DIR BUILD_DIR [END]
 set -uo pipefail
-src=$1 build=$2 end=${3:-0.1}
+src=$1 build=$2 end=${3:-0.05}
 work=$(mktemp -d /tmp/demfem_mpi_coupled_XXXXXX)
 trap 'rm -rf "$work"' EXIT
 run() { # NAME [--ranks N]
   local name=$1; shift
-  DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_small.cfg" \
+  DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_window.cfg" \
     --out "$work/$name" --set run.end_time="$end" --set coupling.stall_timeout=60 "$@" > "$work/$name.log" 2>&1 \
     || { cat "$work/$name.log"; echo "$name: the coupled run failed"; exit 1; }
   local dem fem
@@ -42,6 +45,9 @@ for n in 2 3; do
   touching=$(sed -n 's/.*rank [0-9]* of [0-9]*: \([0-9]*\) surface contacts over.*/\1/p' "$work/ranks$n.log" |
              awk '$1 > 0 {k++} END {print k + 0}')
   [ "$touching" -gt 1 ] || { echo "$n ranks: surface contacts on $touching rank(s), want more than one"; exit 1; }
+  shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/ranks$n.log")
+  grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/ranks$n.log" &&
+    [ "${shifts:-0}" -gt 0 ] || { echo "$n ranks: the window did not shift while distributed"; exit 1; }
   for f in traction.csv summary.json fem_series.csv dem_run.json fem_run.json; do
     cmp "$work/one/$f" "$work/ranks$n/$f" || { echo "$n ranks: $f differs"; exit 1; }
   done
@@ -71,4 +77,4 @@ for name in ("dem_grains.h5", "wheel.h5", "fem.h5"):
     print(f"{name}: {len(da)} datasets identical" + (f" ({len(frames)} frames)" if frames else ""))
 PY
 done
-echo "the coupled tire: same final states and result files for 1, 2 and 3 DEM ranks"
+echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks"

@@ -297,9 +297,6 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if (def->window && !resuming && (rc = dem_window_update(def->window, w, xc, err)))
             goto done;
     }
-    /* distributed: rank 0's grains spread over the ranks at the first neighbour rebuild */
-    if (dist && (rc = dist->attach(w, dist->user, err)))
-        goto done;
 
     const int k_steps = def->exchange_every;
     const double interval = def->dt * k_steps;
@@ -307,14 +304,28 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     long n = 0;
     int stop_requested = 0, asked_checkpoint = 0;
     if (hooks && hooks->restore) {
+        /* distributed: rank 0 reads the checkpoint (one process's), the
+         * loop's state goes to every rank, the grains at the first rebuild */
         dem_coupled_state st = {.n_nodes = (int)c.nn, .x = c.x, .v = c.v};
-        if ((rc = hooks->restore(w, &st, hooks->user, err)) || (rc = dem_surface_update(w, c.x, c.v, err)))
+        if (root && (rc = hooks->restore(w, &st, hooks->user, err)))
             goto done;
+        double loop[3] = {(double)st.exchange, st.time, st.w_dem};
+        if (dist && ((rc = dist->bcast(loop, sizeof loop, dist->user, err)) ||
+                     (rc = dist->bcast(c.x, m * sizeof *c.x, dist->user, err)) ||
+                     (rc = dist->bcast(c.v, m * sizeof *c.v, dist->user, err))))
+            goto done;
+        if ((rc = dem_surface_update(w, c.x, c.v, err)))
+            goto done;
+        st.exchange = (long)loop[0], st.time = loop[1], st.w_dem = loop[2];
         n = st.exchange + 1;
         time = st.time;
         c.w_dem = st.w_dem;
-        cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
+        if (root)
+            cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
     }
+    /* distributed: rank 0's grains spread over the ranks at the first neighbour rebuild */
+    if (dist && (rc = dist->attach(w, dist->user, err)))
+        goto done;
     const long n_first = n;
     dem_coupled_profile prof = {0};
     double t_lap = cm_now();

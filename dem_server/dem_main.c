@@ -198,7 +198,14 @@ static int coupled_bcast(void *buf, size_t bytes, void *user, cm_error *err)
 
 static int coupled_attach(dem_world *w, void *user, cm_error *err)
 {
-    (void)user;
+    /* resuming, rank 0 read its output positions from the checkpoint: every
+     * rank must write (gather) the next frame at the same exchange */
+    output_ctx *c = user;
+    long last[2] = {c->last_frame, c->last_series};
+    int rc = MPI_Bcast(last, 2, MPI_LONG, 0, MPI_COMM_WORLD);
+    if (rc != MPI_SUCCESS)
+        return cm_fail(err, CM_ERR_IO, "MPI broadcast of the output positions failed");
+    c->last_frame = last[0], c->last_series = last[1];
     return dem_mpi_attach(w, MPI_COMM_WORLD, err);
 }
 
@@ -377,11 +384,6 @@ static int run(const options *o)
         cfg.world.threads = o->threads;
     ensure_passive_waiting(o, cfg.world.threads);
     mpi_start(); /* after the re-execution above */
-    if (g_ranks > 1 && o->resume) {
-        rc = cm_fail(&err, CM_ERR_STATE, "dem_server on %d MPI ranks: resuming from a checkpoint is not distributed "
-                     "yet (issue 17); resume on one rank", g_ranks);
-        goto fail;
-    }
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -484,6 +486,7 @@ static int run(const options *o)
         if (g_ranks > 1) {
             if ((rc = dem_mpi_attach(w, MPI_COMM_WORLD, &err)))
                 goto fail;
+            octx.last_frame = octx.last_series = dem_world_steps(w); /* rank 0's clock, now every rank's */
             octx.distributed = 1;
             octx.frames = octx.out != NULL;
             MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
@@ -525,13 +528,14 @@ static int run(const options *o)
         if (g_ranks > 1) {
             def.dist = &dist;
             octx.distributed = 1;
-            octx.frames = octx.out != NULL;
+            octx.frames = octx.dir != NULL; /* resuming, rank 0 opens its output in the restore hook */
             MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
             if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
                 goto fail;
-            if (g_rank == 0 && octx.out)
+            if (g_rank == 0 && octx.dir)
                 cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
-                            "state only, no checkpoints are written (issue 17)", g_ranks);
+                            "state only, no checkpoints are written (a one-process checkpoint resumes on any "
+                            "number of ranks; issue 17)", g_ranks);
         }
 #endif
         dem_coupled_hooks hooks = {.after_exchange = after_exchange,

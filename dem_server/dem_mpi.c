@@ -532,10 +532,12 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
         return cm_fail(err, CM_ERR_STATE, "another rank could not prepare the world");
     /* rank 0 goes on as a world of its own until its next neighbour rebuild,
      * which distributes the grains (so its bits do not change at attach) */
-    double rr[4] = {w->r_min, w->r_max, w->skin, w->need_rebuild};
-    if ((rc = MPI_Bcast(rr, 4, MPI_DOUBLE, 0, comm)) != MPI_SUCCESS)
+    /* and the clock (a world read from a checkpoint on rank 0 is past step 0) */
+    double rr[7] = {w->r_min, w->r_max, w->skin, w->need_rebuild, (double)w->step, w->time, (double)w->next_tag};
+    if ((rc = MPI_Bcast(rr, 7, MPI_DOUBLE, 0, comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "broadcast of the radii", w->step);
     w->r_min = rr[0], w->r_max = rr[1], w->skin = rr[2], w->need_rebuild = rr[3] != 0.0;
+    w->step = (long)rr[4], w->time = rr[5], w->next_tag = (int)rr[6];
     if (rank > 0 && w->g.n > 0)
         return cm_fail(err, CM_ERR_STATE, "rank %d: only rank 0's world may hold grains at attach (%d here)", rank,
                        w->g.n);

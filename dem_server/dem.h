@@ -259,6 +259,7 @@ typedef struct dem_profile {
     double integrate; /* s, Verlet, rotation, the moved-grain check */
     double halo;      /* s, distributed run: ghosts refreshed and the rebuild decision agreed by every rank */
     double migrate;   /* s, distributed run: slabs, grains to their new ranks, fresh ghosts (part of rebuild) */
+    double surf_gather; /* s, distributed run: the ranks' surface contacts gathered and summed on rank 0 (part of surface) */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */
     long surface_lists; /* rebuilds of the grains' triangle lists (the tree walked instead of the lists) */

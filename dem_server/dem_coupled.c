@@ -11,6 +11,10 @@
  *   grains    the last dem_step_grains (grain pairs, integrate,
  *             neighbour rebuild): overlaps the FEM's step
  *   wait      the FEM's reply: surface positions and velocities at t + k dt
+ *   surf_bcast distributed (def->dist): the reply from rank 0, the one that
+ *             talks to fem_server, to the other ranks (the node forces
+ *             were gathered on rank 0 in the surface stage: surf_gather,
+ *             dem_mpi.c)
  *   update    dem_surface_update (BVH refit), the terrain window moved
  *   record    output hook, checkpoint, health check, progress line
  * The FEM needs only the forces, so everything after send runs while it
@@ -27,16 +31,17 @@
 
 typedef struct coupled {
     dem_world *w;
-    ipc_channel *ch;
+    ipc_channel *ch; /* NULL on the ranks other than 0 */
     uint32_t nn;
     int *tris;
-    double *f_sum, *x, *v, *x_sub;
+    double *f_sum, *x, *v, *x_sub, *mass;
     double w_dem; /* J, interface work seen by the DEM */
 } coupled;
 
 static void coupled_free(coupled *c)
 {
     free(c->tris);
+    free(c->mass);
     free(c->f_sum);
     free(c->x);
     free(c->v);
@@ -185,37 +190,102 @@ int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *e
     return CM_OK;
 }
 
+/* The frame from fem_server as the loop reads it: on rank 0 from the ring,
+ * on the other ranks from rank 0 (stage surf_bcast). */
+typedef struct reply {
+    double kind, flags, wheel_x, stop_requested;
+    double window, freeze_lo, freeze_hi; /* distributed: what the window does (dem_window_pending) */
+} reply;
+
+/* The terrain window after an exchange. Distributed, rank 0 alone holds the
+ * window and said what it does: freezing is done by every rank on its own
+ * grains (the rebuild flag agreed), a shift (removal, appended stretch) on
+ * the whole world gathered on rank 0, as one process does it. */
+static int window_update(coupled *c, const dem_coupled_def *def, const reply *in, cm_error *err)
+{
+    const dem_coupled_dist *dist = def->dist;
+    dem_world *w = c->w;
+    int rc = CM_OK;
+    if (!dist)
+        return def->window && isfinite(in->wheel_x) ? dem_window_update(def->window, w, in->wheel_x, err) : CM_OK;
+    if (in->window == DEM_WINDOW_FREEZE) {
+        if (def->window)
+            rc = dem_window_update(def->window, w, in->wheel_x, err);
+        else
+            dem_freeze_outside_x(w, in->freeze_lo, in->freeze_hi);
+        return rc ? rc : dist->agree_rebuild(w, dist->user, err);
+    }
+    if (in->window == DEM_WINDOW_SHIFT) {
+        if ((rc = dist->collect(w, dist->user, err)))
+            return rc;
+        if (def->window && (rc = dem_window_update(def->window, w, in->wheel_x, err)))
+            return rc; /* dem_server stops the other ranks (MPI_Abort) */
+        return dist->rejoin(w, dist->user, err);
+    }
+    return CM_OK;
+}
+
+/* Distributed: the surface as fem_server sent it at the handshake, from
+ * rank 0 to every rank (node and triangle counts, triangles, positions,
+ * masses). */
+static int bcast_surface(coupled *c, const dem_coupled_dist *dist, uint32_t *nt, cm_error *err)
+{
+    uint32_t counts[2] = {c->nn, *nt};
+    int rc = dist->bcast(counts, sizeof counts, dist->user, err);
+    if (rc)
+        return rc;
+    c->nn = counts[0], *nt = counts[1];
+    return CM_OK;
+}
+
 int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
                     cm_error *err)
 {
     coupled c = {.w = w, .ch = ch};
     int rc = CM_OK;     /* common/error.h codes */
     int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, mapped to CM_ERR_PEER at the end */
+    const dem_coupled_dist *dist = def->dist;
+    const int root = !dist || dist->rank == 0; /* talks to fem_server */
 
-    c.nn = ipc_surface_node_count(c.ch);
-    uint32_t nt = ipc_surface_tri_count(c.ch);
+    uint32_t nt = 0;
+    if (root) {
+        c.nn = ipc_surface_node_count(c.ch);
+        nt = ipc_surface_tri_count(c.ch);
+    }
+    if (dist && (rc = bcast_surface(&c, dist, &nt, err)))
+        goto done;
     size_t m = 3 * (size_t)c.nn;
     c.tris = malloc(3 * (size_t)nt * sizeof *c.tris);
     c.f_sum = calloc(m, sizeof *c.f_sum);
     c.x = malloc(m * sizeof *c.x);
     c.v = calloc(m, sizeof *c.v);
     c.x_sub = malloc(m * sizeof *c.x_sub);
-    if (!c.tris || !c.f_sum || !c.x || !c.v || !c.x_sub) {
+    c.mass = malloc(c.nn * sizeof *c.mass);
+    if (!c.tris || !c.f_sum || !c.x || !c.v || !c.x_sub || !c.mass) {
         rc = cm_fail(err, CM_ERR_NOMEM, "out of memory for a surface of %u nodes", c.nn);
         goto done;
     }
-    const uint32_t *t = ipc_surface_tris(c.ch);
-    for (size_t k = 0; k < 3 * (size_t)nt; k++)
-        c.tris[k] = (int)t[k]; /* ipc checked every index against the node count */
-    memcpy(c.x, ipc_surface_nodes(c.ch), m * sizeof *c.x);
+    if (root) {
+        const uint32_t *t = ipc_surface_tris(c.ch);
+        for (size_t k = 0; k < 3 * (size_t)nt; k++)
+            c.tris[k] = (int)t[k]; /* ipc checked every index against the node count */
+        memcpy(c.x, ipc_surface_nodes(c.ch), m * sizeof *c.x);
+        memcpy(c.mass, ipc_surface_masses(c.ch), c.nn * sizeof *c.mass);
+    }
+    if (dist && ((rc = dist->bcast(c.tris, 3 * (size_t)nt * sizeof *c.tris, dist->user, err)) ||
+                 (rc = dist->bcast(c.x, m * sizeof *c.x, dist->user, err)) ||
+                 (rc = dist->bcast(c.mass, c.nn * sizeof *c.mass, dist->user, err))))
+        goto done;
+    /* dem_surface_create checks the triangles' node indices (rank 0's from ipc, checked there too) */
     if ((rc = dem_surface_set(w, (int)c.nn, c.x, (int)nt, c.tris, def->surface_material, err)) ||
-        (rc = dem_surface_set_masses(w, ipc_surface_masses(c.ch), err)))
+        (rc = dem_surface_set_masses(w, c.mass, err)))
         goto done;
     /* Moments about the world origin and traction along +x (the protocol's). */
     const double origin[3] = {0, 0, 0}, travel[3] = {1, 0, 0};
     dem_surface_set_frame(w, origin, travel);
-    cm_log_info("surface: %u nodes, %u triangles from fem_server", c.nn, nt);
-    {
+    if (root)
+        cm_log_info("surface: %u nodes, %u triangles from fem_server", c.nn, nt);
+    if (root) {
         /* the wheel centre's x before the first frame: middle of the surface */
         double xlo = INFINITY, xhi = -INFINITY;
         for (uint32_t k = 0; k < c.nn; k++)
@@ -234,14 +304,28 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     long n = 0;
     int stop_requested = 0, asked_checkpoint = 0;
     if (hooks && hooks->restore) {
+        /* distributed: rank 0 reads the checkpoint (one process's), the
+         * loop's state goes to every rank, the grains at the first rebuild */
         dem_coupled_state st = {.n_nodes = (int)c.nn, .x = c.x, .v = c.v};
-        if ((rc = hooks->restore(w, &st, hooks->user, err)) || (rc = dem_surface_update(w, c.x, c.v, err)))
+        if (root && (rc = hooks->restore(w, &st, hooks->user, err)))
             goto done;
+        double loop[3] = {(double)st.exchange, st.time, st.w_dem};
+        if (dist && ((rc = dist->bcast(loop, sizeof loop, dist->user, err)) ||
+                     (rc = dist->bcast(c.x, m * sizeof *c.x, dist->user, err)) ||
+                     (rc = dist->bcast(c.v, m * sizeof *c.v, dist->user, err))))
+            goto done;
+        if ((rc = dem_surface_update(w, c.x, c.v, err)))
+            goto done;
+        st.exchange = (long)loop[0], st.time = loop[1], st.w_dem = loop[2];
         n = st.exchange + 1;
         time = st.time;
         c.w_dem = st.w_dem;
-        cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
+        if (root)
+            cm_log_info("resumed after exchange %ld, t = %.6f s", st.exchange, time);
     }
+    /* distributed: rank 0's grains spread over the ranks at the first neighbour rebuild */
+    if (dist && (rc = dist->attach(w, dist->user, err)))
+        goto done;
     const long n_first = n;
     dem_coupled_profile prof = {0};
     double t_lap = cm_now();
@@ -251,28 +335,42 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if ((rc = stage_surface(&c, def, finish, &acc, err)))
             goto done;
         lap(&t_lap, &prof.surface);
-        if ((ipc_rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
-            break;
+        if (root && (ipc_rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
+            break; /* distributed: dem_server stops the other ranks (MPI_Abort) */
         lap(&t_lap, &prof.send);
         if (!finish && (rc = dem_step_grains(w, err)))
             goto done;
         lap(&t_lap, &prof.grains);
 
-        const ipc_frame_head *in;
-        const double *q;
-        if ((ipc_rc = ipc_recv(c.ch, &in, &q)))
-            break;
-        lap(&t_lap, &prof.wait);
-        uint32_t kind = in->kind, flags = in->flags;
-        double wheel_x = in->info[IPC_INFO_CENTER_X];
-        /* After our own request the run ends whether or not the peer
-         * checkpointed (a FEM side without checkpoints ignores it). */
-        stop_requested |= (flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
-        if (kind == IPC_FRAME_DATA) {
-            memcpy(c.x, q, m * sizeof *c.x);
-            memcpy(c.v, q + m, m * sizeof *c.v);
+        reply in = {0};
+        if (root) {
+            const ipc_frame_head *head;
+            const double *q;
+            if ((ipc_rc = ipc_recv(c.ch, &head, &q)))
+                break;
+            in.kind = head->kind, in.flags = head->flags, in.wheel_x = head->info[IPC_INFO_CENTER_X];
+            /* After our own request the run ends whether or not the peer
+             * checkpointed (a FEM side without checkpoints ignores it). */
+            in.stop_requested = stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
+            if (dist && def->window && head->kind == IPC_FRAME_DATA && isfinite(in.wheel_x))
+                in.window = dem_window_pending(def->window, in.wheel_x, &in.freeze_lo, &in.freeze_hi);
+            if (head->kind == IPC_FRAME_DATA) {
+                memcpy(c.x, q, m * sizeof *c.x);
+                memcpy(c.v, q + m, m * sizeof *c.v);
+            }
+            ipc_recv_release(c.ch);
         }
-        ipc_recv_release(c.ch);
+        lap(&t_lap, &prof.wait);
+        /* stage "surf_bcast": what rank 0 received, to every rank */
+        if (dist && ((rc = dist->bcast(&in, sizeof in, dist->user, err)) ||
+                     (in.kind == IPC_FRAME_DATA && ((rc = dist->bcast(c.x, m * sizeof *c.x, dist->user, err)) ||
+                                                    (rc = dist->bcast(c.v, m * sizeof *c.v, dist->user, err))))))
+            goto done;
+        if (dist)
+            prof.bcast_bytes += (double)(sizeof in + (in.kind == IPC_FRAME_DATA ? 2 * m * sizeof *c.x : 0));
+        lap(&t_lap, &prof.bcast);
+        const uint32_t kind = (uint32_t)in.kind, flags = (uint32_t)in.flags;
+        stop_requested = in.stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)
             break;
         if (!(kind == IPC_FRAME_DATA)) {
@@ -283,7 +381,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             goto done;
         time += interval;
         /* between two steps: grains at x(t), the next force sum starts after */
-        if (def->window && isfinite(wheel_x) && (rc = dem_window_update(def->window, w, wheel_x, err)))
+        if ((rc = window_update(&c, def, &in, err)))
             goto done;
         lap(&t_lap, &prof.update);
 
@@ -295,10 +393,12 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             if ((rc = hooks->checkpoint(w, &st, hooks->user, err)))
                 goto done;
         }
+        /* distributed: each rank checks its own grains (the worst over the
+         * ranks is the one process's), a failing one stops them all */
         if (n % 100 == 0 && (rc = check_health(w, def, err)))
             goto done;
         double now = cm_now();
-        if (def->progress_every > 0 && now - last_progress >= def->progress_every) {
+        if (root && def->progress_every > 0 && now - last_progress >= def->progress_every) {
             last_progress = now;
             dem_stats st;
             dem_world_stats(w, &st);
@@ -317,11 +417,17 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         rc = cm_fail(err, CM_ERR_PEER, "%s", ipc_error(c.ch));
         goto done;
     }
-    ipc_stats st = ipc_get_stats(c.ch);
-    cm_log_info("coupled run finished: %ld exchanges, t = %.4f s; waited for the FEM %.1f s of %.1f s; interface "
-                "work seen by the DEM %.6g J",
-                n, time, st.wait_recv_s + st.wait_send_s, cm_now() - t_start, c.w_dem);
-    cm_log_info("final state: dem_world_hash %016llx", (unsigned long long)dem_world_hash(w));
+    uint64_t hash = dem_world_hash(w);
+    if (dist && (rc = dist->hash(w, &hash, dist->user, err)))
+        goto done;
+    if (root) {
+        ipc_stats st = ipc_get_stats(c.ch);
+        cm_log_info("coupled run finished: %ld exchanges, t = %.4f s; waited for the FEM %.1f s of %.1f s; "
+                    "interface work seen by the DEM %.6g J",
+                    n, time, st.wait_recv_s + st.wait_send_s, cm_now() - t_start, c.w_dem);
+        cm_log_info("final state: dem_world_hash %016llx%s", (unsigned long long)hash,
+                    dist ? " (every rank's grains)" : "");
+    }
 done:
     if (rc && c.ch && rc != CM_ERR_PEER)
         ipc_fail(c.ch, "dem_server: %s", err->msg);

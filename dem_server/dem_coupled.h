@@ -4,6 +4,8 @@
 #define DEM_COUPLED_H
 
 #include <signal.h>
+#include <stddef.h>
+#include <stdint.h>
 
 #include "dem.h"
 #include "dem_config.h"
@@ -17,10 +19,31 @@ typedef struct dem_coupled_profile {
     double send;     /* s, the interval's mean forces packed and posted */
     double grains;   /* s, dem_step_grains of the last step: overlaps the FEM's step */
     double wait;     /* s, waiting for the FEM's reply (ipc_recv) */
+    double bcast;    /* s, distributed: the reply broadcast from rank 0 to the other ranks (stage surf_bcast) */
     double update;   /* s, the received surface installed (BVH refit), terrain window moved */
     double record;   /* s, output, checkpoints, health check, progress line */
+    double bcast_bytes; /* distributed: bytes broadcast by rank 0 in stage surf_bcast, summed */
     long exchanges;  /* exchanges completed */
 } dem_coupled_profile;
+
+/* The DEM side distributed over ranks (dem_mpi.h; dem_main.c fills it in):
+ * rank 0 alone talks to fem_server, the others follow its exchanges. */
+typedef struct dem_coupled_dist {
+    int rank, ranks;
+    /* `bytes` of buf from rank 0 to every rank (collective) */
+    int (*bcast)(void *buf, size_t bytes, void *user, cm_error *err);
+    /* distributes the world once the surface is installed (collective) */
+    int (*attach)(dem_world *w, void *user, cm_error *err);
+    /* the whole world's dem_world_hash, on every rank (collective) */
+    int (*hash)(dem_world *w, uint64_t *hash, void *user, cm_error *err);
+    /* the terrain window (collective, dem_mpi.h): the world gathered on rank
+     * 0 (which alone holds the window) and spread again after its update;
+     * the rebuild flag agreed after every rank froze its grains */
+    int (*collect)(dem_world *w, void *user, cm_error *err);
+    int (*rejoin)(dem_world *w, void *user, cm_error *err);
+    int (*agree_rebuild)(dem_world *w, void *user, cm_error *err);
+    void *user;
+} dem_coupled_dist;
 
 typedef struct dem_coupled_def {
     const char *shm;        /* segment name chosen by the launcher */
@@ -41,6 +64,8 @@ typedef struct dem_coupled_def {
     dem_window *window;     /* terrain window moved with the wheel every exchange (NULL = none) */
     dem_window_def window_def; /* its keys (also the footprint check's expected sinkage without a window) */
     dem_coupled_profile *profile; /* out: where the time went (may be NULL) */
+    const dem_coupled_dist *dist; /* NULL: one process. Distributed: no checkpoints yet; ch (dem_run_coupled)
+                                     and window only on rank 0, NULL elsewhere */
 } dem_coupled_def;
 
 /* The coupled loop's own state, saved in checkpoints besides the world's. */

@@ -186,6 +186,54 @@ static int after_exchange(dem_world *w, void *user, long exchange, cm_error *err
     return write_outputs(w, user, err);
 }
 
+#ifdef DEMFEM_MPI
+/* The coupled loop over ranks (dem_coupled_dist): rank 0 talks to
+ * fem_server, the reply is broadcast, the world distributed once the
+ * surface is installed. */
+static int coupled_bcast(void *buf, size_t bytes, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_bcast(MPI_COMM_WORLD, buf, bytes, err);
+}
+
+static int coupled_attach(dem_world *w, void *user, cm_error *err)
+{
+    /* resuming, rank 0 read its output positions from the checkpoint: every
+     * rank must write (gather) the next frame at the same exchange */
+    output_ctx *c = user;
+    long last[2] = {c->last_frame, c->last_series};
+    int rc = MPI_Bcast(last, 2, MPI_LONG, 0, MPI_COMM_WORLD);
+    if (rc != MPI_SUCCESS)
+        return cm_fail(err, CM_ERR_IO, "MPI broadcast of the output positions failed");
+    c->last_frame = last[0], c->last_series = last[1];
+    return dem_mpi_attach(w, MPI_COMM_WORLD, err);
+}
+
+static int coupled_hash(dem_world *w, uint64_t *hash, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_hash(w, hash, err);
+}
+
+static int coupled_collect(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_collect(w, err);
+}
+
+static int coupled_rejoin(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_rejoin(w, err);
+}
+
+static int coupled_agree_rebuild(dem_world *w, void *user, cm_error *err)
+{
+    (void)user;
+    return dem_mpi_agree_rebuild(w, err);
+}
+#endif
+
 static int write_checkpoint(dem_world *w, const dem_coupled_state *st, void *user, cm_error *err)
 {
     output_ctx *c = user;
@@ -260,10 +308,11 @@ static void report_profile(const dem_profile *p, const dem_coupled_profile *c, c
     const char *names[] = {"rebuild", "surface", "pairs", "integrate"};
     const double t[] = {p->rebuild, p->surface, p->pairs, p->integrate};
     const int n_st = (int)(sizeof t / sizeof t[0]);
-    const char *cnames[] = {"surface", "send", "grains", "wait", "update", "record"};
-    const double ct[] = {c ? c->surface : 0, c ? c->send : 0,   c ? c->grains : 0,
-                         c ? c->wait : 0,    c ? c->update : 0, c ? c->record : 0};
-    const int n_cst = (int)(sizeof ct / sizeof ct[0]);
+    const char *cnames[] = {"surface", "send", "grains", "wait", "update", "record", "surf_bcast"};
+    const double ct[] = {c ? c->surface : 0, c ? c->send : 0,   c ? c->grains : 0, c ? c->wait : 0,
+                         c ? c->update : 0,  c ? c->record : 0, c ? c->bcast : 0};
+    /* surf_bcast only in a distributed run */
+    const int n_cst = (int)(sizeof ct / sizeof ct[0]) - (c && c->bcast_bytes > 0 ? 0 : 1);
     double tot = 0, ctot = 0;
     for (int k = 0; k < n_st; k++)
         tot += t[k];
@@ -335,11 +384,6 @@ static int run(const options *o)
         cfg.world.threads = o->threads;
     ensure_passive_waiting(o, cfg.world.threads);
     mpi_start(); /* after the re-execution above */
-    if (g_ranks > 1 && !o->standalone) {
-        rc = cm_fail(&err, CM_ERR_STATE, "dem_server on %d MPI ranks runs DEM-only scenes (--standalone, ./run "
-                     "--dem-only) for now; the coupled tire over ranks is phase 2 of issue 17", g_ranks);
-        goto fail;
-    }
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -359,7 +403,7 @@ static int run(const options *o)
                            .profile = &cprof};
     /* Coupled: shake hands first, so that settling a large bed does not run
      * into the FEM side's connect timeout. */
-    if (!o->standalone && (rc = dem_coupled_attach(&def, &ch, &err))) {
+    if (!o->standalone && g_rank == 0 && (rc = dem_coupled_attach(&def, &ch, &err))) {
         if (g_sig->stop) /* stopped by the launcher because the other side failed: that side says why */
             cm_log_info("stopped by signal %d while waiting for fem_server", (int)g_sig->stop);
         else
@@ -442,6 +486,7 @@ static int run(const options *o)
         if (g_ranks > 1) {
             if ((rc = dem_mpi_attach(w, MPI_COMM_WORLD, &err)))
                 goto fail;
+            octx.last_frame = octx.last_series = dem_world_steps(w); /* rank 0's clock, now every rank's */
             octx.distributed = 1;
             octx.frames = octx.out != NULL;
             MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
@@ -475,8 +520,26 @@ static int run(const options *o)
         def.window_def = cfg.window;
         octx.window = window;
         def.interrupt = &g_sig->interrupt;
+#ifdef DEMFEM_MPI
+        const dem_coupled_dist dist = {.rank = g_rank, .ranks = g_ranks, .bcast = coupled_bcast,
+                                       .attach = coupled_attach, .hash = coupled_hash, .collect = coupled_collect,
+                                       .rejoin = coupled_rejoin, .agree_rebuild = coupled_agree_rebuild,
+                                       .user = &octx};
+        if (g_ranks > 1) {
+            def.dist = &dist;
+            octx.distributed = 1;
+            octx.frames = octx.dir != NULL; /* resuming, rank 0 opens its output in the restore hook */
+            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
+                goto fail;
+            if (g_rank == 0 && octx.dir)
+                cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
+                            "state only, no checkpoints are written (a one-process checkpoint resumes on any "
+                            "number of ranks; issue 17)", g_ranks);
+        }
+#endif
         dem_coupled_hooks hooks = {.after_exchange = after_exchange,
-                                   .checkpoint = octx.dir ? write_checkpoint : NULL,
+                                   .checkpoint = octx.dir && g_ranks == 1 ? write_checkpoint : NULL,
                                    .restore = o->resume ? restore_checkpoint : NULL,
                                    .user = &octx};
         cm_signals_graceful(octx.dir != NULL); /* from here a signal asks for a checkpoint */
@@ -485,6 +548,7 @@ static int run(const options *o)
         ch = NULL; /* closed by the run */
         if (rc == CM_ERR_PEER) {
             cm_log_error("%s", err.msg);
+            mpi_abort_others(3); /* the other ranks wait for rank 0 */
             exit_code = g_sig->stop ? 128 + (int)g_sig->stop : 3;
             goto cleanup;
         }
@@ -510,6 +574,14 @@ static int run(const options *o)
             cm_log_info("rank %d of %d: %d grains (+%d ghosts), cell columns [%d, %d), %ld migrated; halo %.2f s, "
                         "migration %.2f s", g_rank, g_ranks, ms.owned, ms.ghosts, ms.col_lo, ms.col_hi,
                         ms.migrated, s.profile.halo, s.profile.migrate);
+            if (!o->standalone)
+                cm_log_info("rank %d of %d: %ld surface contacts over %ld passes; surf_gather %.2f s, surf_bcast "
+                            "%.2f s; %ld window shifts collected", g_rank, g_ranks, ms.surf_contacts,
+                            ms.surf_gathers, s.profile.surf_gather, cprof.bcast, ms.collects);
+            if (!o->standalone && g_rank == 0 && ms.surf_gathers > 0 && cprof.exchanges > 0)
+                cm_log_info("MPI traffic of the surface: %.0f bytes broadcast per exchange, %.0f bytes of contacts "
+                            "gathered on rank 0 per DEM step (mean)", cprof.bcast_bytes / (double)cprof.exchanges,
+                            (double)sizeof(double) * (double)ms.surf_doubles / (double)ms.surf_gathers);
         }
 #endif
     }

@@ -40,6 +40,10 @@ typedef struct dist_ctx {
     size_t sbuf_cap, rbuf_cap;
     double *hsbuf, *hrbuf;     /* spring records: tag, tag, 3 doubles */
     size_t hsbuf_cap, hrbuf_cap;
+    double *psbuf, *prbuf;     /* packed surface contacts: this rank's, every rank's (rank 0) */
+    size_t psbuf_cap, prbuf_cap;
+    long surf_contacts, surf_gathers, surf_doubles;
+    long collects;             /* dem_mpi_collect calls (terrain window shifts) */
     dem_hash extra;            /* received springs, by tag pair */
     double *extra_val;
     size_t extra_cap;
@@ -48,7 +52,13 @@ typedef struct dist_ctx {
 
 enum { REC_FIXED = 39, SPRING_REC = 5 };
 
-static size_t rec_size(const dem_world *w) { return REC_FIXED + 3 * (size_t)w->wall_stride; }
+/* surface history per grain (dem_surface.h), after the wall springs */
+enum { SURF_HIST = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE };
+
+static size_t rec_size(const dem_world *w)
+{
+    return REC_FIXED + 3 * (size_t)w->wall_stride + (w->surf ? SURF_HIST : 0);
+}
 
 /* Everything a grain carries, as doubles (integers exactly). */
 static void pack_grain(const dem_world *w, int i, double *r)
@@ -63,6 +73,9 @@ static void pack_grain(const dem_world *w, int i, double *r)
         g->tag[i],   g->frozen[i], g->shape[i], g->wall_mask[i], g->surf_count[i], g->wall_near[i]};
     memcpy(r, v, sizeof v);
     memcpy(r + REC_FIXED, g->wall_hist + (size_t)i * 3 * w->wall_stride, 3 * (size_t)w->wall_stride * sizeof *r);
+    if (w->surf) /* the tangential springs against the tire travel with the grain */
+        memcpy(r + REC_FIXED + 3 * (size_t)w->wall_stride, w->surf->hist + (size_t)i * SURF_HIST,
+               SURF_HIST * sizeof *r);
 }
 
 static void unpack_grain(dem_world *w, int i, const double *r)
@@ -81,6 +94,9 @@ static void unpack_grain(dem_world *w, int i, const double *r)
     g->shape[i] = (int)r[35], g->wall_mask[i] = (uint32_t)r[36], g->surf_count[i] = (int)r[37];
     g->wall_near[i] = (uint32_t)r[38];
     memcpy(g->wall_hist + (size_t)i * 3 * w->wall_stride, r + REC_FIXED, 3 * (size_t)w->wall_stride * sizeof *r);
+    if (w->surf) /* a gathered view without a surface skips them */
+        memcpy(w->surf->hist + (size_t)i * SURF_HIST, r + REC_FIXED + 3 * (size_t)w->wall_stride,
+               SURF_HIST * sizeof *r);
 }
 
 static int grow(double **a, size_t *cap, size_t need)
@@ -404,6 +420,55 @@ static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
     return CM_OK;
 }
 
+/* Stage "surf_gather", after every surface pass: the ranks' contacts
+ * (dem_surface_pack: in slot order, owned grains only) gathered on rank 0
+ * in rank order, which is the global grain order (the slabs are contiguous
+ * ranges of it), and summed there as one process sums its own
+ * (dem_surface_sum_packed): the node forces sent to fem_server are the same
+ * bits for any number of ranks. Each rank keeps its own largest overlap
+ * (and its grain) for the health check: the largest over the ranks is the
+ * one process's. */
+static int dist_surf_gather(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    dem_surface *s = w->surf;
+    const double t0 = cm_now();
+    const long n = dem_surface_packed_size(w);
+    int rc;
+    if (n > INT_MAX || grow(&d->psbuf, &d->psbuf_cap, (size_t)n + 1))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to pack %ld doubles of surface contacts", w->step, n);
+    dem_surface_pack(w, d->psbuf);
+    d->surf_contacts += s->tot.contacts;
+    int cnt = (int)n;
+    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the surface contact counts", w->step);
+    long total = 0;
+    if (d->rank == 0) {
+        for (int r = 0; r < d->size; r++)
+            total += d->rcount[r];
+        if (total > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)total + 1))
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step,
+                           total);
+        d->rdispl[0] = 0;
+        for (int r = 1; r < d->size; r++)
+            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
+    }
+    if ((rc = MPI_Gatherv(d->psbuf, cnt, MPI_DOUBLE, d->prbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
+        MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the surface contacts", w->step);
+    if (d->rank == 0) {
+        const double max_overlap = s->tot.max_overlap;
+        const int worst_grain = s->tot.worst_grain, worst_tri = s->tot.worst_tri;
+        if ((rc = dem_surface_sum_packed(w, d->prbuf, total, err)))
+            return rc;
+        s->tot.max_overlap = max_overlap, s->tot.worst_grain = worst_grain, s->tot.worst_tri = worst_tri;
+        d->surf_doubles += total;
+    }
+    d->surf_gathers++;
+    w->prof.surf_gather += cm_now() - t0;
+    return CM_OK;
+}
+
 static void ctx_free(dist_ctx *d);
 
 static void dist_release(dem_world *w)
@@ -413,7 +478,7 @@ static void dist_release(dem_world *w)
     w->dist_ctx = NULL;
 }
 
-static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release};
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release, dist_surf_gather};
 
 static void ctx_free(dist_ctx *d)
 {
@@ -427,6 +492,8 @@ static void ctx_free(dist_ctx *d)
     free(d->rbuf);
     free(d->hsbuf);
     free(d->hrbuf);
+    free(d->psbuf);
+    free(d->prbuf);
     dem_hash_free(&d->extra);
     free(d->extra_val);
     free(d->order);
@@ -441,9 +508,14 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
     if (w->def.reorder_every != 1)
         return cm_fail(err, CM_ERR_KEY, "dem.reorder_every = %d: a distributed run needs 1 (the global grain order)",
                        w->def.reorder_every);
-    if (w->surf || w->n_shaped > 0)
-        return cm_fail(err, CM_ERR_STATE, "a distributed world holds spheres and walls only (no triangle surface, "
-                       "no shaped grains) for now");
+    if (w->n_shaped > 0)
+        return cm_fail(err, CM_ERR_STATE, "a distributed world holds spheres only (no shaped grains) for now");
+    /* every rank or none holds the surface (installed before attaching) */
+    int has_surf = w->surf != NULL, surf_all[2] = {0, 0}, mine[2] = {has_surf, -has_surf};
+    MPI_Allreduce(mine, surf_all, 2, MPI_INT, MPI_MIN, comm);
+    if (surf_all[0] != -surf_all[1])
+        return cm_fail(err, CM_ERR_STATE, "rank %d: the triangle surface must be installed on every rank before "
+                       "dem_mpi_attach (or on none)", rank);
     /* walls from rank 0 */
     int nw = w->n_walls;
     if ((rc = MPI_Bcast(&nw, 1, MPI_INT, 0, comm)) != MPI_SUCCESS ||
@@ -460,10 +532,12 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
         return cm_fail(err, CM_ERR_STATE, "another rank could not prepare the world");
     /* rank 0 goes on as a world of its own until its next neighbour rebuild,
      * which distributes the grains (so its bits do not change at attach) */
-    double rr[4] = {w->r_min, w->r_max, w->skin, w->need_rebuild};
-    if ((rc = MPI_Bcast(rr, 4, MPI_DOUBLE, 0, comm)) != MPI_SUCCESS)
+    /* and the clock (a world read from a checkpoint on rank 0 is past step 0) */
+    double rr[7] = {w->r_min, w->r_max, w->skin, w->need_rebuild, (double)w->step, w->time, (double)w->next_tag};
+    if ((rc = MPI_Bcast(rr, 7, MPI_DOUBLE, 0, comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "broadcast of the radii", w->step);
     w->r_min = rr[0], w->r_max = rr[1], w->skin = rr[2], w->need_rebuild = rr[3] != 0.0;
+    w->step = (long)rr[4], w->time = rr[5], w->next_tag = (int)rr[6];
     if (rank > 0 && w->g.n > 0)
         return cm_fail(err, CM_ERR_STATE, "rank %d: only rank 0's world may hold grains at attach (%d here)", rank,
                        w->g.n);
@@ -511,6 +585,22 @@ void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s)
     s->scattered = d->scattered;
     s->springs_sent = d->springs_sent;
     s->cross_pairs = w->n_cross_pairs;
+    s->surf_contacts = d->surf_contacts;
+    s->surf_gathers = d->surf_gathers;
+    s->surf_doubles = d->surf_doubles;
+    s->collects = d->collects;
+}
+
+int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err)
+{
+    for (size_t at = 0; at < bytes;) { /* counts are ints: pieces of at most 1 GiB */
+        size_t k = bytes - at < ((size_t)1 << 30) ? bytes - at : (size_t)1 << 30;
+        int rc = MPI_Bcast((char *)buf + at, (int)k, MPI_BYTE, 0, comm);
+        if (rc != MPI_SUCCESS)
+            return mpi_fail(err, rc, "broadcast from rank 0", -1);
+        at += k;
+    }
+    return CM_OK;
 }
 
 static int by_tag(const void *a, const void *b)
@@ -642,4 +732,201 @@ int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
     view->prepared = 1;
     view->def.reorder_every = 0; /* keep the gathered order */
     return dem_neighbour_rebuild(view, err);
+}
+
+/* Rank of slot `tag` in d->order (sorted by tag), or -1. */
+static int slot_of_tag(const dem_world *w, const dist_ctx *d, int n, int tag)
+{
+    int lo = 0, hi = n - 1;
+    while (lo <= hi) {
+        int mid = (lo + hi) / 2, t = w->g.tag[d->order[mid]];
+        if (t == tag)
+            return d->order[mid];
+        if (t < tag)
+            lo = mid + 1;
+        else
+            hi = mid - 1;
+    }
+    return -1;
+}
+
+/* Rank 0 after a collect: the springs recs[0 .. n) (SPRING_REC each, lower
+ * tag first, a pair possibly twice: from both ranks of an owned–ghost pair)
+ * installed as the current list's history: a list of the pairs (never
+ * computed with: the world is rebuilt before its next pair step) whose
+ * hash the next rebuild carries the springs over from, as from any list,
+ * and whose pairs dist_rebuild sends with their grains. */
+static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n, cm_error *err)
+{
+    dem_grains *g = &w->g;
+    for (int i = 0; i < g->n; i++)
+        d->order[i] = i;
+    g_sort_tags = g->tag;
+    qsort(d->order, (size_t)g->n, sizeof *d->order, slot_by_tag);
+    if (n > INT_MAX / 2 || dem_hash_reset(&d->extra, (int)n) || dem_pairs_reserve(w, (int)(n ? n : 1)) ||
+        dem_hash_reset(&w->hist[w->hist_cur], (int)n))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld contact springs", w->step, n);
+    double *hv = w->hist_val[w->hist_cur];
+    unsigned char *ori = w->hist_ori[w->hist_cur];
+    int np = 0;
+    for (long k = 0; k < n; k++) {
+        const double *r = recs + (size_t)k * SPRING_REC;
+        const uint64_t key = dem_pair_key((int)r[0], (int)r[1]);
+        int s = dem_hash_insert(&d->extra, key);
+        if (d->extra.row[s] >= 0) /* sent by both ranks of the pair: the same spring */
+            continue;
+        d->extra.row[s] = (int)k;
+        int a = slot_of_tag(w, d, g->n, (int)r[0]), b = slot_of_tag(w, d, g->n, (int)r[1]);
+        if (a < 0 || b < 0) /* a removed grain's pair */
+            continue;
+        w->pi[np] = a, w->pj[np] = b; /* lower tag first: ori 1 */
+        memcpy(hv + 3 * (size_t)np, r + 2, 3 * sizeof *hv);
+        ori[np] = 1;
+        w->hist[w->hist_cur].row[dem_hash_insert(&w->hist[w->hist_cur], key)] = np;
+        np++;
+    }
+    w->n_pairs = np;
+    w->n_active_pairs = 0;
+    w->plan.valid = 0;
+    return CM_OK;
+}
+
+int dem_mpi_collect(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d || !w->dist)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_collect: the world is not distributed");
+    dem_grains *g = &w->g;
+    const size_t rs = rec_size(w);
+    const int n = w->own_hi - w->own_lo, np = w->n_pairs;
+    int rc, ok = 1;
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs + 1) || grow(&d->hsbuf, &d->hsbuf_cap, (size_t)np * SPRING_REC + 1))
+        ok = 0;
+    long mine[2] = {n, np}, tot[2] = {0, 0};
+    if ((rc = MPI_Reduce(mine, tot, 2, MPI_LONG, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "reduce of the grain counts", w->step);
+    if (d->rank == 0)
+        ok = ok && tot[0] <= g->cap && tot[0] * (long)rs <= INT_MAX && tot[1] * SPRING_REC <= INT_MAX &&
+             !grow(&d->rbuf, &d->rbuf_cap, (size_t)tot[0] * rs + 1) &&
+             !grow(&d->hrbuf, &d->hrbuf_cap, (size_t)tot[1] * SPRING_REC + 1);
+    int okall = 0;
+    MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
+    if (!okall)
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to collect %ld grains and %ld springs on rank 0 "
+                       "(max_grains %d)", w->step, tot[0], tot[1], g->cap);
+    for (int k = 0; k < n; k++)
+        pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
+    const double *hv = w->hist_val[w->hist_cur];
+    for (int p = 0; p < np; p++) { /* lower tag first, as migrating springs */
+        int a = w->pi[p], b = w->pj[p];
+        const double sg = g->tag[a] < g->tag[b] ? 1.0 : -1.0;
+        double *r = d->hsbuf + (size_t)p * SPRING_REC;
+        r[0] = g->tag[a] < g->tag[b] ? g->tag[a] : g->tag[b];
+        r[1] = g->tag[a] < g->tag[b] ? g->tag[b] : g->tag[a];
+        r[2] = sg * hv[3 * (size_t)p], r[3] = sg * hv[3 * (size_t)p + 1], r[4] = sg * hv[3 * (size_t)p + 2];
+    }
+    int cnt[2] = {n * (int)rs, np * SPRING_REC};
+    int *gc = d->rcount, *gd = d->rdispl, *hc = d->hrcount, *hd = d->hrdispl;
+    if ((rc = MPI_Gather(&cnt[0], 1, MPI_INT, gc, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Gather(&cnt[1], 1, MPI_INT, hc, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grain counts", w->step);
+    if (d->rank == 0) {
+        gd[0] = hd[0] = 0;
+        for (int r = 1; r < d->size; r++)
+            gd[r] = gd[r - 1] + gc[r - 1], hd[r] = hd[r - 1] + hc[r - 1];
+    }
+    if ((rc = MPI_Gatherv(d->sbuf, cnt[0], MPI_DOUBLE, d->rbuf, gc, gd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Gatherv(d->hsbuf, cnt[1], MPI_DOUBLE, d->hrbuf, hc, hd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "gather of the grains and springs", w->step);
+    d->collects++;
+    d->distributed = 0; /* the next rebuild spreads rank 0's grains again */
+    w->n_active_pairs = 0;
+    w->plan.valid = 0;
+    if (d->rank != 0) { /* nothing left here: grains and springs come back at the next rebuild */
+        g->n = 0;
+        w->n_pairs = 0;
+        w->own_lo = w->own_hi = 0;
+        w->n_frozen = 0;
+        w->need_rebuild = 1;
+        if (dem_hash_reset(&w->hist[w->hist_cur], 0))
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory", w->step);
+        return CM_OK;
+    }
+    /* rank 0: the whole world in the global order (rank order), as one
+     * process holds it: ids in tag order, the springs by tag pair */
+    g->n = (int)tot[0];
+    w->n_frozen = 0;
+    for (int k = 0; k < g->n; k++) {
+        unpack_grain(w, k, d->rbuf + (size_t)k * rs);
+        w->n_frozen += g->frozen[k];
+    }
+    if ((rc = install_springs(w, d, d->hrbuf, tot[1], err)))
+        return rc;
+    for (int id = 0; id < g->n; id++) /* d->order: slots by tag */
+        g->id[d->order[id]] = id, g->slot_of[id] = d->order[id];
+    w->own_lo = 0, w->own_hi = g->n;
+    /* one process is between two steps here: its list current (no rebuild
+     * pending); what changes the world must ask for one (dem_mpi_rejoin checks) */
+    w->need_rebuild = 0;
+    w->dist = NULL; /* rank 0 steps alone until dem_mpi_rejoin */
+    return CM_OK;
+}
+
+int dem_mpi_rejoin(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_rejoin: the world is not distributed");
+    int rc;
+    double hdr[6] = {0};
+    if (d->rank == 0) {
+        w->dist = &dist_ops;
+        w->own_lo = 0, w->own_hi = w->g.n;
+        /* a removal emptied the list, its springs wait in the hash: a list
+         * of them again, for the ranks the grains go to */
+        if (w->n_pairs == 0 && w->hist[w->hist_cur].count > 0) {
+            const dem_hash *h = &w->hist[w->hist_cur];
+            const double *hv = w->hist_val[w->hist_cur];
+            const unsigned char *ori = w->hist_ori[w->hist_cur];
+            if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * SPRING_REC + 1))
+                return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d springs", w->step, h->count);
+            long m = 0;
+            for (int s = 0; s < h->cap; s++) {
+                if (h->key[s] == DEM_HASH_EMPTY || h->row[s] < 0)
+                    continue;
+                const int r = h->row[s];
+                const double sg = ori[r] ? 1.0 : -1.0; /* to lower tag first */
+                double *rec = d->hrbuf + (size_t)m++ * SPRING_REC;
+                rec[0] = (double)(uint32_t)(h->key[s] >> 32), rec[1] = (double)(uint32_t)(h->key[s] & 0xffffffffu);
+                rec[2] = sg * hv[3 * (size_t)r], rec[3] = sg * hv[3 * (size_t)r + 1], rec[4] = sg * hv[3 * (size_t)r + 2];
+            }
+            if ((rc = install_springs(w, d, d->hrbuf, m, err)))
+                return rc;
+        }
+        hdr[0] = w->need_rebuild && w->prepared, hdr[1] = w->r_min, hdr[2] = w->r_max, hdr[3] = w->skin;
+        hdr[4] = w->n_walls, hdr[5] = w->next_tag;
+    }
+    if ((rc = MPI_Bcast(hdr, 6, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Bcast(w->walls, (int)((int)hdr[4] * sizeof(dem_wall)), MPI_BYTE, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "broadcast of the changed world", w->step);
+    if (hdr[0] == 0.0)
+        return cm_fail(err, CM_ERR_STATE, "step %ld: rank 0 changed the gathered world without asking for a neighbour "
+                       "rebuild: its grains cannot be spread over the ranks again", w->step);
+    w->r_min = hdr[1], w->r_max = hdr[2], w->skin = hdr[3], w->n_walls = (int)hdr[4], w->next_tag = (int)hdr[5];
+    w->need_rebuild = 1;
+    w->walls_near_valid = 0;
+    return CM_OK;
+}
+
+int dem_mpi_agree_rebuild(dem_world *w, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d)
+        return CM_OK;
+    int mine = w->need_rebuild != 0, any = 0;
+    int rc = MPI_Allreduce(&mine, &any, 1, MPI_INT, MPI_MAX, d->comm);
+    if (rc != MPI_SUCCESS)
+        return mpi_fail(err, rc, "allreduce of the rebuild flag", w->step);
+    w->need_rebuild = any;
+    return CM_OK;
 }

@@ -14,8 +14,11 @@
  *
  * Internal to dem_server (the server and the tests); MPI stays out of the
  * `dem` library: the step calls the stages through w->dist (dem_world.h).
- * Phase 1: spheres, walls, gravity and frozen grains; no triangle surface,
- * no shaped grains, no grains added or removed while distributed. */
+ * Spheres, walls, gravity, frozen grains and the tire's triangle surface
+ * (installed on every rank before attaching; each rank's contacts summed on
+ * rank 0 in the global grain order, stage surf_gather); no shaped grains.
+ * Grains are added or removed only on the world collected on rank 0
+ * (dem_mpi_collect, the terrain window). */
 #ifndef DEM_MPI_H
 #define DEM_MPI_H
 
@@ -44,6 +47,10 @@ typedef struct dem_mpi_stats {
     long migrated;       /* grains this rank sent to another at later rebuilds */
     long springs_sent;   /* contact springs sent with them */
     long cross_pairs;    /* pairs owned–ghost in the current list */
+    long surf_contacts;  /* grain–surface contacts of this rank's grains, summed over the steps */
+    long surf_gathers;   /* surface passes gathered */
+    long surf_doubles;   /* rank 0: doubles of packed contacts it received, summed over the passes */
+    long collects;       /* dem_mpi_collect calls (terrain window shifts) */
 } dem_mpi_stats;
 void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s);
 
@@ -59,6 +66,23 @@ int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err);
  * neighbour list of its own (no re-sort), so that dem_output_frame writes
  * what one process writes for the same state. */
 int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err);
+
+/* The terrain window over ranks (collective): collect gathers every rank's
+ * grains and springs on rank 0, in the global order as one process holds
+ * them, and leaves the others empty; rank 0 then changes its world as one
+ * process (dem_window_update: the removal, the appended stretch and its
+ * seam relaxation are one process's, so every rank agrees on them); rejoin
+ * spreads it again at the next neighbour rebuild (rank 0's walls, radii and
+ * tag counter to every rank). The change must ask for a neighbour rebuild,
+ * as removals and additions do (CM_ERR_STATE otherwise). */
+int dem_mpi_collect(dem_world *w, cm_error *err);
+int dem_mpi_rejoin(dem_world *w, cm_error *err);
+/* need_rebuild raised on every rank when raised on one (collective), e.g.
+ * after each rank froze its grains (dem_freeze_outside_x). */
+int dem_mpi_agree_rebuild(dem_world *w, cm_error *err);
+
+/* `bytes` of buf from rank 0 to every rank of comm (collective). */
+int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err);
 
 /* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
  * each at least one column, split so that the grain counts count[c] are as

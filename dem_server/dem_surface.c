@@ -815,29 +815,106 @@ static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi,
     return overflow_slot;
 }
 
+/* Adds one recorded contact's totals (its node forces are added before, by
+ * the caller): the one place where they are summed, for a process's own
+ * contacts and for every rank's packed ones alike. */
+static inline void replay_totals(const surf_rec *rc, dem_surface_total *tot)
+{
+    v3_store(tot->force, v3_add(v3_load(tot->force), v3_load(rc->fs)));
+    v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_load(rc->mom)));
+    if (rc->along > 0.0)
+        tot->traction_pos += rc->along;
+    else
+        tot->traction_neg += rc->along;
+    tot->contacts++;
+    if (rc->overlap > tot->max_overlap)
+        tot->max_overlap = rc->overlap, tot->worst_grain = rc->grain, tot->worst_tri = rc->tri;
+    tot->energy += rc->energy;
+}
+
+static inline void add_node_force(double *node_f, int node, double fx, double fy, double fz)
+{
+    double *f = node_f + 3 * node;
+    f[0] += fx;
+    f[1] += fy;
+    f[2] += fz;
+}
+
 /* Adds a thread's recorded contacts into the node forces and the totals. */
 static void surf_replay(const surf_scratch *sc, double *node_f, dem_surface_total *tot)
 {
     const node_add *na = sc->na;
     for (int r = 0; r < sc->n_rec; r++) {
-        const surf_rec *rc = &sc->rec[r];
-        for (int k = 0; k < rc->n_nodes; k++, na++) {
-            double *f = node_f + 3 * na->node;
-            f[0] += na->f[0];
-            f[1] += na->f[1];
-            f[2] += na->f[2];
-        }
-        v3_store(tot->force, v3_add(v3_load(tot->force), v3_load(rc->fs)));
-        v3_store(tot->moment, v3_add(v3_load(tot->moment), v3_load(rc->mom)));
-        if (rc->along > 0.0)
-            tot->traction_pos += rc->along;
-        else
-            tot->traction_neg += rc->along;
-        tot->contacts++;
-        if (rc->overlap > tot->max_overlap)
-            tot->max_overlap = rc->overlap, tot->worst_grain = rc->grain, tot->worst_tri = rc->tri;
-        tot->energy += rc->energy;
+        for (int k = 0; k < sc->rec[r].n_nodes; k++, na++)
+            add_node_force(node_f, na->node, na->f[0], na->f[1], na->f[2]);
+        replay_totals(&sc->rec[r], tot);
     }
+}
+
+/* Packed contact: fs[3], mom[3], along, overlap, energy, n_nodes, then per
+ * node its index and force (DEM_SURF_PACK_NODE doubles); integers exactly. */
+enum { PACK_REC = 10 };
+
+long dem_surface_packed_size(const dem_world *w)
+{
+    const dem_surface *s = w->surf;
+    long n = 0;
+    for (int t = 0; s && t < s->n_threads; t++)
+        n += PACK_REC * (long)s->scratch[t].n_rec + DEM_SURF_PACK_NODE * (long)s->scratch[t].n_na;
+    return n;
+}
+
+long dem_surface_pack(const dem_world *w, double *buf)
+{
+    const dem_surface *s = w->surf;
+    double *b = buf;
+    for (int t = 0; s && t < s->n_threads; t++) { /* thread ranges ascend: grain order */
+        const surf_scratch *sc = &s->scratch[t];
+        const node_add *na = sc->na;
+        for (int r = 0; r < sc->n_rec; r++) {
+            const surf_rec *rc = &sc->rec[r];
+            const double h[PACK_REC] = {rc->fs[0],   rc->fs[1],    rc->fs[2],  rc->mom[0], rc->mom[1],
+                                        rc->mom[2],  rc->along,    rc->overlap, rc->energy, (double)rc->n_nodes};
+            memcpy(b, h, sizeof h);
+            b += PACK_REC;
+            for (int k = 0; k < rc->n_nodes; k++, na++) {
+                b[0] = (double)na->node, b[1] = na->f[0], b[2] = na->f[1], b[3] = na->f[2];
+                b += DEM_SURF_PACK_NODE;
+            }
+        }
+    }
+    return (long)(b - buf);
+}
+
+int dem_surface_sum_packed(dem_world *w, const double *buf, long n, cm_error *err)
+{
+    dem_surface *s = w->surf;
+    if (!s)
+        return cm_fail(err, CM_ERR_STATE, "dem_surface_sum_packed at step %ld: no surface installed", w->step);
+    memset(s->node_f, 0, 3 * (size_t)s->n_nodes * sizeof *s->node_f);
+    memset(&s->tot, 0, sizeof s->tot);
+    for (long at = 0; at < n;) {
+        const double *h = buf + at;
+        if (at + PACK_REC > n)
+            return cm_fail(err, CM_ERR_RANGE, "step %ld: packed surface contacts cut short at %ld of %ld", w->step,
+                           at, n);
+        at += PACK_REC;
+        if (!(h[9] >= 0.0 && h[9] * DEM_SURF_PACK_NODE <= (double)(n - at)))
+            return cm_fail(err, CM_ERR_RANGE, "step %ld: a packed surface contact has %g node entries", w->step, h[9]);
+        surf_rec rc = {.along = h[6], .overlap = h[7], .energy = h[8], .n_nodes = (int)h[9],
+                       .grain = -1, .tri = -1}; /* another rank's slot: not named here */
+        memcpy(rc.fs, h, 3 * sizeof *h);
+        memcpy(rc.mom, h + 3, 3 * sizeof *h);
+        for (int k = 0; k < rc.n_nodes; k++, at += DEM_SURF_PACK_NODE) {
+            const double *e = buf + at;
+            if (!(e[0] >= 0.0 && e[0] < s->n_nodes))
+                return cm_fail(err, CM_ERR_RANGE, "step %ld: a packed surface contact names node %g of %d", w->step,
+                               e[0], s->n_nodes);
+            add_node_force(s->node_f, (int)e[0], e[1], e[2], e[3]);
+        }
+        replay_totals(&rc, &s->tot);
+    }
+    return CM_OK;
 }
 
 int dem_surface_contacts(dem_world *w, cm_error *err)
@@ -847,6 +924,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     const int nt = w->n_threads;
     const double dt = w->def.dt;
     const int nn3 = 3 * s->n_nodes;
+    const int g0 = w->dist ? w->own_lo : 0, n_own = (w->dist ? w->own_hi : g->n) - g0;
     memset(s->node_f, 0, (size_t)nn3 * sizeof *s->node_f);
     for (int t = 0; t < nt; t++)
         s->scratch[t].grew_grain = -1, s->scratch[t].nomem = 0, s->scratch[t].n_rec = s->scratch[t].n_na = 0,
@@ -888,7 +966,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
 #endif
     {
         int tid = dem_thread_id();
-        int lo = (int)((long)g->n * tid / nt), hi = (int)((long)g->n * (tid + 1) / nt);
+        /* distributed: the owned grains only (a ghost's contacts are its owner's) */
+        int lo = g0 + (int)((long)n_own * tid / nt), hi = g0 + (int)((long)n_own * (tid + 1) / nt);
         surf_scratch *sc = &s->scratch[tid];
         if (!use_lists) {
             int ov = surf_lists_build(s, g, lo, hi, 2.0 * margin, sc);
@@ -1089,5 +1168,9 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     if (overflow_slot >= 0)
         return cm_fail(err, CM_ERR_RANGE, "step %ld: grain %d: surface tree deeper than the search stack (64)", w->step,
                        g->id[overflow_slot]);
+    /* distributed: every rank's contacts summed on rank 0 in rank order,
+     * which is the grain order (dem_mpi.c, stage surf_gather) */
+    if (w->dist && w->dist->surf_gather)
+        return w->dist->surf_gather(w, err);
     return CM_OK;
 }

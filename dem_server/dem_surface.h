@@ -79,4 +79,18 @@ int dem_surface_grow(dem_surface *s, int grain_cap);
  * added to the grains, node forces and totals of the surface refilled. */
 int dem_surface_contacts(dem_world *w, cm_error *err);
 
+/* Distributed run (dem_mpi.c): the contacts of this process's last
+ * dem_surface_contacts packed as doubles in grain order, each as fs[3],
+ * mom[3], along, overlap, energy, n_nodes, then per node its index and
+ * force (DEM_SURF_PACK_NODE doubles; integers exactly). packed_size: the
+ * doubles dem_surface_pack writes (and returns). */
+#define DEM_SURF_PACK_NODE 4
+long dem_surface_packed_size(const dem_world *w);
+long dem_surface_pack(const dem_world *w, double *buf);
+/* The node forces and totals refilled from n doubles of packed contacts
+ * (every rank's, in rank order: the same sums, bit for bit, as one process
+ * makes of the same contacts). The largest overlap's grain and triangle are
+ * not known (-1). Checked as data from another process: CM_ERR_RANGE. */
+int dem_surface_sum_packed(dem_world *w, const double *buf, long n, cm_error *err);
+
 #endif

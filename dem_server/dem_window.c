@@ -305,6 +305,17 @@ static int append_stretch(dem_window *win, dem_world *w, int *added, double *fra
     return CM_OK;
 }
 
+int dem_window_pending(const dem_window *win, double wheel_x, double *freeze_lo, double *freeze_hi)
+{
+    const dem_window_def *d = &win->def;
+    const dem_window_state *st = &win->st;
+    /* the conditions of dem_window_update, in its order */
+    int shift = wheel_x - d->behind - st->x_cut >= d->shift || st->x_front - wheel_x < d->ahead;
+    int freeze = d->freeze_distance > 0.0 && (shift || !(fabs(wheel_x - st->x_freeze) < win->r_max));
+    *freeze_lo = wheel_x - d->freeze_distance, *freeze_hi = wheel_x + d->freeze_distance;
+    return shift ? DEM_WINDOW_SHIFT : freeze ? DEM_WINDOW_FREEZE : DEM_WINDOW_NONE;
+}
+
 int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err)
 {
     const dem_window_def *d = &win->def;

@@ -87,6 +87,14 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
 /* One exchange's update with the wheel centre's x. */
 int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err);
 
+/* What dem_window_update would do at wheel_x (nothing changes): nothing,
+ * only freeze (dem_freeze_outside_x(w, *freeze_lo, *freeze_hi)), or shift
+ * (remove behind and/or append in front, then freeze). A distributed DEM
+ * (dem_coupled.c) freezes on every rank for the second and updates the
+ * world gathered on rank 0 for the third. */
+enum { DEM_WINDOW_NONE = 0, DEM_WINDOW_FREEZE = 1, DEM_WINDOW_SHIFT = 2 };
+int dem_window_pending(const dem_window *win, double wheel_x, double *freeze_lo, double *freeze_hi);
+
 const dem_window_state *dem_window_get_state(const dem_window *win);
 void dem_window_set_state(dem_window *win, const dem_window_state *st);
 

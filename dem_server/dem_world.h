@@ -123,6 +123,10 @@ typedef struct dem_dist_ops {
     int (*agree)(dem_world *w, double *maxd2, int *bad, cm_error *err);
     /* frees the distribution's own data (dem_world_destroy calls it) */
     void (*release)(dem_world *w);
+    /* after every surface pass (dem_surface_contacts): the ranks' contacts
+     * gathered and summed on rank 0 (its node forces and totals then the
+     * whole surface's); NULL: each rank keeps its own */
+    int (*surf_gather)(dem_world *w, cm_error *err);
 } dem_dist_ops;
 
 struct dem_world {

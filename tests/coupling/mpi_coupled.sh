@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# The coupled tire with its DEM side over MPI ranks (issue 17, phase 2):
+# tests/coupling/scenes/tire_window.cfg (tire_small with a terrain window
+# that removes grains behind, appends a stretch in front and freezes and
+# thaws grains as the wheel travels) for END s, run through ./run by one
+# plain dem_server and by `./run --ranks 2` and `--ranks 3` (oversubscribed
+# next to fem_server on two cores). Every run must end in the same
+# dem_world_hash and fem_state_hash and write the same result files:
+# traction.csv, summary.json, fem_series.csv and the run records byte for
+# byte, every dataset of dem_grains.h5 (the ranks' grains gathered on rank
+# 0), wheel.h5 and fem.h5 byte for byte. dem_series.csv is left out: a
+# distributed run writes its initial row only (dem_server/README.md).
+# So that the test could fail, the distributed runs must have moved grains
+# between ranks, found surface contacts on more than one rank, and shifted
+# the window (a removal and an appended stretch) while distributed.
+# Usage: mpi_coupled.sh SOURCE_DIR BUILD_DIR [END]
+set -uo pipefail
+src=$1 build=$2 end=${3:-0.05}
+work=$(mktemp -d /tmp/demfem_mpi_coupled_XXXXXX)
+trap 'rm -rf "$work"' EXIT
+run() { # NAME [--ranks N]
+  local name=$1; shift
+  DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_window.cfg" \
+    --out "$work/$name" --set run.end_time="$end" --set coupling.stall_timeout=60 "$@" > "$work/$name.log" 2>&1 \
+    || { cat "$work/$name.log"; echo "$name: the coupled run failed"; exit 1; }
+  local dem fem
+  dem=$(sed -n 's/.*final state: dem_world_hash \([0-9a-f]*\).*/\1/p' "$work/$name.log" | head -n 1)
+  fem=$(sed -n 's/.*final state: fem_state_hash \([0-9a-f]*\).*/\1/p' "$work/$name.log" | head -n 1)
+  [ -n "$dem" ] && [ -n "$fem" ] || { cat "$work/$name.log"; echo "$name: no final hashes logged"; exit 1; }
+  echo "$dem $fem" > "$work/$name.hash"
+}
+run one
+read -r dem1 fem1 < "$work/one.hash"
+echo "one process: dem_world_hash $dem1, fem_state_hash $fem1"
+for n in 2 3; do
+  run ranks$n --ranks $n
+  read -r dem fem < "$work/ranks$n.hash"
+  grep -h 'rank .* of' "$work/ranks$n.log"
+  echo "$n ranks: dem_world_hash $dem, fem_state_hash $fem"
+  [ "$dem" = "$dem1" ] || { echo "$n ranks: the DEM's final state differs"; exit 1; }
+  [ "$fem" = "$fem1" ] || { echo "$n ranks: the FEM's final state differs"; exit 1; }
+  moved=$(sed -n 's/.*rank [0-9]* of [0-9]*:.*, \([0-9]*\) migrated;.*/\1/p' "$work/ranks$n.log" |
+          awk '{s += $1} END {print s + 0}')
+  [ "$moved" -gt 0 ] || { echo "$n ranks: no grain migrated between ranks"; exit 1; }
+  touching=$(sed -n 's/.*rank [0-9]* of [0-9]*: \([0-9]*\) surface contacts over.*/\1/p' "$work/ranks$n.log" |
+             awk '$1 > 0 {k++} END {print k + 0}')
+  [ "$touching" -gt 1 ] || { echo "$n ranks: surface contacts on $touching rank(s), want more than one"; exit 1; }
+  shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/ranks$n.log")
+  grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/ranks$n.log" &&
+    [ "${shifts:-0}" -gt 0 ] || { echo "$n ranks: the window did not shift while distributed"; exit 1; }
+  for f in traction.csv summary.json fem_series.csv dem_run.json fem_run.json; do
+    cmp "$work/one/$f" "$work/ranks$n/$f" || { echo "$n ranks: $f differs"; exit 1; }
+  done
+  "${DEMFEM_PYTHON:-/usr/bin/python3}" - "$work/one" "$work/ranks$n" <<'PY' || { echo "$n ranks: HDF5 results differ"; exit 1; }
+import sys
+import h5py
+
+def datasets(group, prefix=""):
+    out = {}
+    for k, v in group.items():
+        if isinstance(v, h5py.Group):
+            out.update(datasets(v, prefix + k + "/"))
+        else:
+            out[prefix + k] = v
+    return out
+
+for name in ("dem_grains.h5", "wheel.h5", "fem.h5"):
+    a = h5py.File(f"{sys.argv[1]}/{name}", "r")
+    b = h5py.File(f"{sys.argv[2]}/{name}", "r")
+    da, db = datasets(a), datasets(b)
+    assert sorted(da) == sorted(db), f"{name}: datasets {sorted(da)} vs {sorted(db)}"
+    assert len(da) > 0, f"{name}: no datasets"
+    for k in da:
+        x, y = da[k][()], db[k][()]
+        assert x.shape == y.shape and x.tobytes() == y.tobytes(), f"{name}/{k} differs"
+    frames = [k for k in a if k.startswith("frame_")]
+    print(f"{name}: {len(da)} datasets identical" + (f" ({len(frames)} frames)" if frames else ""))
+PY
+done
+echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks"

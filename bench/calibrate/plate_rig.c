@@ -13,7 +13,12 @@
  *   fem = { plate = { size = [0.05, 0.05];    # m, along x and y (b = the smaller)
  *                     center = [0.15, 0.15];  # m, x and y
  *                     start_z = 0.13;         # m, the plate's height at t = 0
- *                     speed = 0.05; }; };     # m/s, downwards
+ *                     speed = 0.05;           # m/s, downwards
+ *                     start_gap = 0.0;        # m, optional: > 0 puts the plate this far above
+ *                                             #   the highest grain top the DEM reports at the
+ *                                             #   first exchange (start_z must be above it)
+ *                     stop_sinkage = 0.0; }; };  # m, optional: > 0 ends the run at this
+ *                                             #   sinkage below the first contact
  * and reads `run` and `coupling` like the servers. The DEM side ends the run
  * at run.end_time. Output: DIR/plate_sinkage.csv with the columns
  *   t (s), plate_z (m), sinkage (m, below the plate's first contact, 0
@@ -35,6 +40,8 @@ typedef struct plate_def {
     double center[2]; /* m */
     double start_z;   /* m, height of the plate at t = 0 */
     double speed;     /* m/s, downwards */
+    double start_gap; /* m above the highest grain top at the first exchange; 0: start at start_z */
+    double stop_sinkage; /* m below the first contact where the rig ends the run; 0: run.end_time */
 } plate_def;
 
 typedef struct plate_rig {
@@ -43,6 +50,8 @@ typedef struct plate_rig {
     cm_csv *csv;
     double row[7];
     double z_touch, f_max; /* m (NAN before the first contact), N */
+    double z0, t0;         /* m, s: the descent is z0 - speed (t - t0) */
+    int placed;            /* start_gap: the plate was put above the bed top */
 } plate_rig;
 
 static int read_plate(cm_scene *s, void *user, cm_error *err)
@@ -51,7 +60,9 @@ static int read_plate(cm_scene *s, void *user, cm_error *err)
     if (cm_scene_doubles(s, "fem.plate.size", 2, 1e-4, 100, d->size, err) ||
         cm_scene_doubles(s, "fem.plate.center", 2, -1e3, 1e3, d->center, err) ||
         cm_scene_double(s, "fem.plate.start_z", -1e3, 1e3, &d->start_z, err) ||
-        cm_scene_double(s, "fem.plate.speed", 1e-6, 10, &d->speed, err))
+        cm_scene_double(s, "fem.plate.speed", 1e-6, 10, &d->speed, err) ||
+        cm_scene_double_opt(s, "fem.plate.start_gap", 0, 1, 0, &d->start_gap, err) ||
+        cm_scene_double_opt(s, "fem.plate.stop_sinkage", 0, 10, 0, &d->stop_sinkage, err))
         return err->code;
     return CM_OK;
 }
@@ -66,7 +77,18 @@ static int plate_advance(void *user, const rig_in *in, rig_out *out, cm_error *e
     double fz = 0;
     for (int i = 0; i < 4; i++)
         fz += f[3 * i + 2];
-    const double z_now = r->d.start_z - r->d.speed * t, z_next = r->d.start_z - r->d.speed * in->t_next;
+    const double bed_top = info[IPC_INFO_BED_TOP];
+    if (!r->placed && r->d.start_gap > 0) {
+        /* the first exchange: no grain touches the plate at start_z (above
+         * the bed top, checked), so it may be put start_gap above the top */
+        if (!(bed_top > 0) || bed_top + r->d.start_gap > r->d.start_z)
+            return cm_fail(err, CM_ERR_RANGE, "plate_rig: fem.plate.start_gap needs the DEM's bed top (%g m) "
+                                "plus the gap below fem.plate.start_z (%g m)", bed_top, r->d.start_z);
+        r->z0 = bed_top + r->d.start_gap;
+        r->t0 = t;
+    }
+    r->placed = 1;
+    const double z_now = r->z0 - r->d.speed * (t - r->t0), z_next = r->z0 - r->d.speed * (in->t_next - r->t0);
     for (int i = 0; i < 4; i++) {
         out->x[3 * i] = r->x0[3 * i];
         out->x[3 * i + 1] = r->x0[3 * i + 1];
@@ -78,6 +100,8 @@ static int plate_advance(void *user, const rig_in *in, rig_out *out, cm_error *e
     if (isnan(r->z_touch) && contacts > 0)
         r->z_touch = z_now;
     const double sinkage = isnan(r->z_touch) ? 0.0 : r->z_touch - z_now;
+    if (r->d.stop_sinkage > 0 && sinkage >= r->d.stop_sinkage)
+        out->stop = 1;
     const double area = r->d.size[0] * r->d.size[1];
     const double row[7] = {t, z_now, sinkage, bed - z_now, fz, fz / area, contacts};
     for (int k = 0; k < 7; k++)
@@ -102,6 +126,7 @@ int main(int argc, char **argv)
     plate_rig r = {.z_touch = NAN};
     if (rig_read_scene("plate_rig", &a, &rcfg, read_plate, &r.d))
         return 1;
+    r.z0 = r.d.start_z;
     const double hx = 0.5 * r.d.size[0], hy = 0.5 * r.d.size[1];
     const double corners[4][2] = {{-hx, -hy}, {hx, -hy}, {hx, hy}, {-hx, hy}};
     double mass[4];

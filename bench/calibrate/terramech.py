@@ -87,6 +87,60 @@ def bekker_fit(curves, refine=20):
             "rms_rel": float(np.sqrt(np.mean(((ps - model) / ps) ** 2)))}
 
 
+# Two-sided 95 % quantiles of Student's t for 1..30 degrees of freedom
+# (standard tables); beyond 30 the normal's 1.96 is within 2 %.
+_T95 = [12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145,
+        2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048,
+        2.045, 2.042]
+
+
+def t95(dof):
+    """The two-sided 95 % quantile of Student's t with dof degrees of freedom."""
+    if dof < 1:
+        raise ValueError("an interval needs at least one degree of freedom (got %d)" % dof)
+    return _T95[dof - 1] if dof <= 30 else 1.96
+
+
+def bekker_fit_runs(runs):
+    """Bekker's k_c, k_phi, n from an ensemble of plate runs, with 95 %
+    intervals from the scatter between runs: runs is a list of (b, z, p), one
+    per run (bed, position), two or more widths with two or more runs each.
+
+    The estimate is bekker_fit over all runs together. Its interval is the
+    stratified delete-one-run jackknife (the strata are the widths): each run
+    left out in turn, the fit repeated,
+        var = sum_h (m_h - 1)/m_h sum_i (theta_(h,i) - mean_h theta_(h,.))^2,
+    and half-width t95(N - H) sqrt(var), N runs in H widths. A run is the
+    unit of independent scatter (the points of one curve are strongly
+    correlated: the same grains give way under the plate), so the fit's own
+    least-squares covariance over points would be far too narrow. Returns the
+    bekker_fit dict plus '<name>_lo', '<name>_hi', '<name>_se' for k_c, k_phi
+    and n, 'runs' and 'dof'."""
+    widths = sorted({float(b) for b, _, _ in runs})
+    groups = {b: [i for i, r in enumerate(runs) if float(r[0]) == b] for b in widths}
+    if len(widths) < 2 or min(len(g) for g in groups.values()) < 2:
+        raise ValueError("intervals need two or more runs at each of two or more plate widths")
+    fit = bekker_fit(runs)
+    keys = ("k_c", "k_phi", "n")
+    var = dict.fromkeys(keys, 0.0)
+    for b, idx in groups.items():
+        m = len(idx)
+        loo = [bekker_fit([r for k, r in enumerate(runs) if k != i]) for i in idx]
+        for q in keys:
+            v = np.array([f[q] for f in loo])
+            var[q] += (m - 1.0) / m * float(np.sum((v - v.mean()) ** 2))
+    dof = len(runs) - len(widths)
+    t = t95(dof)
+    for q in keys:
+        se = math.sqrt(var[q])
+        fit[q + "_se"] = se
+        fit[q + "_lo"] = fit[q] - t * se
+        fit[q + "_hi"] = fit[q] + t * se
+    fit["runs"] = len(runs)
+    fit["dof"] = dof
+    return fit
+
+
 def mohr_coulomb_fit(sigma, tau):
     """Cohesion c (Pa) and friction angle phi (deg) from the shear strength
     tau at normal stresses sigma: tau = c + sigma tan phi (linear least
@@ -96,6 +150,34 @@ def mohr_coulomb_fit(sigma, tau):
         raise ValueError("the friction angle needs shear tests at two or more normal stresses")
     tan_phi, c = np.linalg.lstsq(np.column_stack([sigma, np.ones(len(sigma))]), tau, rcond=None)[0]
     return {"c": float(c), "phi_deg": math.degrees(math.atan(tan_phi))}
+
+
+def mohr_coulomb_fit_ci(sigma, tau):
+    """mohr_coulomb_fit with 95 % intervals from the least-squares covariance
+    (each (sigma, tau) an independent test: a sample of its own), t95 with
+    N - 2 degrees of freedom; three or more tests. Adds c_lo, c_hi, phi_lo_deg,
+    phi_hi_deg (through tan phi's interval) and dof."""
+    sigma, tau = np.asarray(sigma, float), np.asarray(tau, float)
+    if len(sigma) < 3 or len(np.unique(sigma)) < 2:
+        raise ValueError("an interval for c and phi needs three or more tests at two or more normal stresses")
+    A = np.column_stack([sigma, np.ones(len(sigma))])
+    (tan_phi, c), res = np.linalg.lstsq(A, tau, rcond=None)[:2]
+    dof = len(sigma) - 2
+    s2 = float(np.sum((tau - A @ np.array([tan_phi, c])) ** 2)) / dof
+    cov = s2 * np.linalg.inv(A.T @ A)
+    t = t95(dof)
+    dt, dc = t * math.sqrt(cov[0, 0]), t * math.sqrt(cov[1, 1])
+    return {"c": float(c), "phi_deg": math.degrees(math.atan(tan_phi)), "c_lo": float(c - dc), "c_hi": float(c + dc),
+            "phi_lo_deg": math.degrees(math.atan(tan_phi - dt)), "phi_hi_deg": math.degrees(math.atan(tan_phi + dt)),
+            "dof": dof}
+
+
+def mean_ci(x):
+    """Mean and 95 % half-width t95(N - 1) s / sqrt(N) of independent samples x."""
+    x = np.asarray(x, float)
+    if len(x) < 2:
+        raise ValueError("an interval needs two or more samples")
+    return float(np.mean(x)), t95(len(x) - 1) * float(np.std(x, ddof=1)) / math.sqrt(len(x))
 
 
 def janosi_fit(j, tau, tau_max=None, refine=30):

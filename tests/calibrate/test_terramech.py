@@ -97,6 +97,91 @@ def janosi_exact_and_noisy():
     ensure(worst < 0.08, "noisy K off by %g" % worst)
 
 
+def plate_ensemble(rng, truth, m, widths=(0.05, 0.10), run_scatter=0.1, n_scatter=0.03, point_noise=0.05):
+    """m synthetic plate runs per width as the DEM gives them: each run's
+    modulus off by a random factor (1 + run_scatter e), its exponent by
+    n_scatter e about the middle of the range, and along the curve a
+    correlated (AR(1), 0.9 per bin) relative noise of point_noise: the true
+    law is the ensemble's mean."""
+    z = np.linspace(0.003, 0.03, 55)
+    zr = 0.015
+    runs = []
+    for b in widths:
+        for _ in range(m):
+            kb = (truth["k_c"] / b + truth["k_phi"]) * (1.0 + run_scatter * rng.standard_normal())
+            n = truth["n"] + n_scatter * rng.standard_normal()
+            e, a = np.zeros(len(z)), 0.0
+            for i in range(len(z)):
+                a = 0.9 * a + math.sqrt(1.0 - 0.81) * rng.standard_normal()
+                e[i] = a
+            runs.append((b, z, kb * zr ** truth["n"] * (z / zr) ** n * (1.0 + point_noise * e)))
+    return runs
+
+
+def bekker_runs_coverage():
+    # The intervals of bekker_fit_runs (jackknife over runs) hold the true
+    # k_c, k_phi, n in about 95 % of synthetic ensembles of 3 runs per width
+    # (asserted >= 85 % of 200: the jackknife with 4 degrees of freedom is a
+    # little narrow), are not vacuous (n within +-10 %, k_phi within +-60 %
+    # at the median; k_c, small beside k_phi b for sand, is not resolved by
+    # 10 % run scatter and only its coverage is asserted), and shrink with
+    # the scatter; one run per width is refused.
+    truth = {"k_c": 5e3, "k_phi": 8e5, "n": 0.9}
+    rng = np.random.default_rng(2024)
+    hit = dict.fromkeys(truth, 0)
+    half = {k: [] for k in truth}
+    N = 200
+    for _ in range(N):
+        f = tm.bekker_fit_runs(plate_ensemble(rng, truth, 3))
+        for k in truth:
+            hit[k] += f[k + "_lo"] <= truth[k] <= f[k + "_hi"]
+            half[k].append(0.5 * (f[k + "_hi"] - f[k + "_lo"]) / abs(truth[k]))
+    med = {k: float(np.median(half[k])) for k in truth}
+    print("  %d ensembles of 3 + 3 runs: coverage k_c %.3f, k_phi %.3f, n %.3f; median half-width k_c %.2f, "
+          "k_phi %.2f, n %.3f (relative)" % (N, hit["k_c"] / N, hit["k_phi"] / N, hit["n"] / N, med["k_c"],
+                                            med["k_phi"], med["n"]))
+    for k in truth:
+        ensure(hit[k] >= 0.85 * N, "%s covered in %d of %d ensembles" % (k, hit[k], N))
+    ensure(med["n"] < 0.10 and med["k_phi"] < 0.6, "intervals too wide: %s" % med)
+    f = tm.bekker_fit_runs(plate_ensemble(rng, truth, 3, run_scatter=0.01, n_scatter=0.003, point_noise=0.005))
+    print("  scatter / 10: n %.4f [%.4f, %.4f], k_phi %.4g [%.4g, %.4g]" % (f["n"], f["n_lo"], f["n_hi"], f["k_phi"],
+                                                                       f["k_phi_lo"], f["k_phi_hi"]))
+    ensure(0.5 * (f["n_hi"] - f["n_lo"]) / truth["n"] < med["n"] / 3, "the interval of n does not shrink")
+    ensure(f["n_lo"] <= truth["n"] <= f["n_hi"], "n not covered at small scatter")
+    try:
+        tm.bekker_fit_runs(plate_ensemble(rng, truth, 1))
+    except ValueError as e:
+        ensure("two or more runs" in str(e), str(e))
+        return
+    raise AssertionError("one run per width accepted")
+
+
+def mohr_coulomb_ci_coverage():
+    # Six shear tests at 10/20/40 kPa (two each) with 4 % scatter on tau:
+    # the 95 % intervals of c and phi (least-squares covariance, t with 4
+    # dof) cover the truth in >= 91 % of 400 sets (binomial: 95 +- 1.1 %);
+    # mean_ci's interval of a mean likewise (K from several runs).
+    rng = np.random.default_rng(7)
+    c, phi = 1.5e3, 33.0
+    sigma = np.array([1e4, 1e4, 2e4, 2e4, 4e4, 4e4])
+    N, hc, hp, hm = 400, 0, 0, 0
+    for _ in range(N):
+        tau = c + sigma * math.tan(math.radians(phi))
+        f = tm.mohr_coulomb_fit_ci(sigma, tau + 0.04 * 1.3e4 * rng.standard_normal(len(sigma)))
+        hc += f["c_lo"] <= c <= f["c_hi"]
+        hp += f["phi_lo_deg"] <= phi <= f["phi_hi_deg"]
+        m, h = tm.mean_ci(0.5e-3 + 0.1e-3 * rng.standard_normal(5))
+        hm += abs(m - 0.5e-3) <= h
+    print("  coverage over %d sets: c %.3f, phi %.3f, mean of 5 %.3f" % (N, hc / N, hp / N, hm / N))
+    ensure(hc >= 0.91 * N and hp >= 0.91 * N and hm >= 0.91 * N, "coverage %d %d %d of %d" % (hc, hp, hm, N))
+    try:
+        tm.mohr_coulomb_fit_ci(sigma[:2], sigma[:2])
+    except ValueError as e:
+        ensure("three or more" in str(e), str(e))
+        return
+    raise AssertionError("two tests accepted")
+
+
 def wong_reece_compaction():
     # No shear and the stress maximum at the bottom (c1 = c2 = 0): the
     # classical Bekker wheel. Motion resistance = compaction resistance
@@ -136,7 +221,8 @@ def wong_reece_slip_shape():
 
 
 CASES = {f.__name__: f for f in (bekker_exact, bekker_noisy, bekker_needs_two_widths, mohr_coulomb_exact,
-                                 janosi_exact_and_noisy, wong_reece_compaction, wong_reece_slip_shape)}
+                                 janosi_exact_and_noisy, bekker_runs_coverage, mohr_coulomb_ci_coverage,
+                                 wong_reece_compaction, wong_reece_slip_shape)}
 
 if __name__ == "__main__":
     names = sys.argv[1:] or list(CASES)

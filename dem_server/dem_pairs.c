@@ -228,11 +228,7 @@ enum { BATCH = 64 };
 typedef struct pair_batch {
     int n;
     int p[BATCH], i[BATCH], j[BATCH], c[BATCH];
-    /* in, copied by the filter, which has them in registers: the branch
-     * vector, the radii and the spring (the loop reads them in order
-     * instead of gathering them lane by lane) */
     double ex[BATCH], ey[BATCH], ez[BATCH], d2[BATCH];
-    double ri[BATCH], rj[BATCH], hx[BATCH], hy[BATCH], hz[BATCH];
     /* out: force on i, torques on i and j, the new spring; R and |F_n| for
      * the rolling torque */
     double fx[BATCH], fy[BATCH], fz[BATCH];
@@ -267,14 +263,12 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
                                                                      pair_batch *b, const int rolling,
                                                                      const int uniform)
 {
-    const double *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
+    const double *restrict r = in->r, *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
     const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
-    const double *restrict inv_m = in->inv_m, *restrict inv_i = in->inv_i;
-    const double *restrict bri = b->ri, *restrict brj = b->rj;
-    const double *restrict bhx = b->hx, *restrict bhy = b->hy, *restrict bhz = b->hz;
+    const double *restrict inv_m = in->inv_m, *restrict inv_i = in->inv_i, *restrict hist = in->hist;
     const double *restrict cE = ct->E, *restrict cG = ct->G, *restrict cgn = ct->gn, *restrict cgt = ct->gt;
     const double *restrict cmu = ct->mu, *restrict cst = ct->st_sn, *restrict cmr = ct->mr;
-    const int *restrict bi = b->i, *restrict bj = b->j, *restrict bc = b->c;
+    const int *restrict bi = b->i, *restrict bj = b->j, *restrict bc = b->c, *restrict bp = b->p;
     const double *restrict bex = b->ex, *restrict bey = b->ey, *restrict bez = b->ez, *restrict bd2 = b->d2;
     double *restrict ofx = b->fx, *restrict ofy = b->fy, *restrict ofz = b->fz;
     double *restrict otix = b->tix, *restrict otiy = b->tiy, *restrict otiz = b->tiz;
@@ -286,9 +280,9 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
     for (int k = 0; k < n; k++) {
         /* uniform: one material pair in the batch, its coefficients loaded
          * once for all lanes instead of gathered lane by lane */
-        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k];
+        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k], p3 = 3 * bp[k];
         const double ex = bex[k], ey = bey[k], ez = bez[k];
-        const double ri = bri[k], rj = brj[k], rs = ri + rj;
+        const double ri = r[i], rj = r[j], rs = ri + rj;
         double d = sqrt(bd2[k]);
         double delta = rs - d; /* eq. 18 */
         double nx = ex / d, ny = ey / d, nz = ez / d; /* eq. 10 */
@@ -312,7 +306,7 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         double vtx = vrx - nx * vn, vty = vry - ny * vn, vtz = vrz - nz * vn; /* eq. 14 */
         double ctt = cgt[c] * cst[c] * sq;
         /* dem_mindlin_spring */
-        double sx = bhx[k], sy = bhy[k], sz = bhz[k];
+        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2];
         double s2 = sx * sx + sy * sy + sz * sz;
         double dsn = sx * nx + sy * ny + sz * nz;
         double px = sx - nx * dsn, py = sy - ny * dsn, pz = sz - nz * dsn;
@@ -433,17 +427,14 @@ static inline __attribute__((always_inline)) int candidate(const pair_arrays *a,
 {
     const int i = a->pi[p], j = a->pj[p];
     const double ex = a->x[i] - a->x[j], ey = a->y[i] - a->y[j], ez = a->z[i] - a->z[j];
-    const double ri = a->r[i], rj = a->r[j];
-    const double d2 = ex * ex + ey * ey + ez * ez, rs = ri + rj;
+    const double d2 = ex * ex + ey * ey + ez * ez, rs = a->r[i] + a->r[j];
     const int apart = (d2 >= rs * rs) | (d2 == 0.0);
     double *xi = a->hist + 3 * (size_t)p;
-    const double h0 = xi[0], h1 = xi[1], h2 = xi[2];
-    if (apart & ((h0 != 0.0) | (h1 != 0.0) | (h2 != 0.0)))
+    if (apart & ((xi[0] != 0.0) | (xi[1] != 0.0) | (xi[2] != 0.0)))
         xi[0] = xi[1] = xi[2] = 0.0;
     const int k = b->n;
     b->p[k] = p, b->i[k] = i, b->j[k] = j, b->c[k] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
     b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
-    b->ri[k] = ri, b->rj[k] = rj, b->hx[k] = h0, b->hy[k] = h1, b->hz[k] = h2;
     b->n = k + !apart;
     if (b->n == BATCH) {
         batch_forces(a, ct, b);

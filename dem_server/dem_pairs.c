@@ -359,31 +359,32 @@ static inline int batch_uniform(const pair_batch *b)
 }
 
 /* The four instances of the loop: with or without rolling resistance, one
- * material pair or several. */
-#define BATCH_FORCES_DISPATCH(in, ct, b)                                                                           \
-    do {                                                                                                           \
-        if (batch_uniform(b)) {                                                                                    \
-            if ((ct)->rolling)                                                                                     \
-                batch_forces_body(in, ct, b, 1, 1);                                                                \
-            else                                                                                                   \
-                batch_forces_body(in, ct, b, 0, 1);                                                                \
-        } else if ((ct)->rolling)                                                                                  \
-            batch_forces_body(in, ct, b, 1, 0);                                                                    \
-        else                                                                                                       \
-            batch_forces_body(in, ct, b, 0, 0);                                                                    \
-    } while (0)
+ * material pair or several (inlined into each instruction-set build). */
+static inline __attribute__((always_inline)) void batch_forces_dispatch(const pair_arrays *in, const coef_table *ct,
+                                                                         pair_batch *b)
+{
+    if (batch_uniform(b)) {
+        if (ct->rolling)
+            batch_forces_body(in, ct, b, 1, 1);
+        else
+            batch_forces_body(in, ct, b, 0, 1);
+    } else if (ct->rolling)
+        batch_forces_body(in, ct, b, 1, 0);
+    else
+        batch_forces_body(in, ct, b, 0, 0);
+}
 
 #if defined(__x86_64__) && defined(__GNUC__)
 __attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays *in, const coef_table *ct,
                                                                pair_batch *b)
 {
-    BATCH_FORCES_DISPATCH(in, ct, b);
+    batch_forces_dispatch(in, ct, b);
 }
 #endif
 
 static void batch_forces_portable(const pair_arrays *in, const coef_table *ct, pair_batch *b)
 {
-    BATCH_FORCES_DISPATCH(in, ct, b);
+    batch_forces_dispatch(in, ct, b);
 }
 
 typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);

@@ -25,7 +25,8 @@ hashes() { # LOG -> "dem fem"
   echo "$dem $fem"
 }
 "$src/run" "$src/tests/coupling/scenes/tire_ckpt.cfg" --out "$work/one" --set run.end_time=0.03 \
-  --set run.checkpoint_every=0.015 --set coupling.stall_timeout=60 > "$work/one.log" 2>&1 \
+  --set run.checkpoint_every=0.015 --set coupling.stall_timeout=60 \
+  --set "dem.bed.file=\"$work/tire_ckpt_bed.h5\"" > "$work/one.log" 2>&1 \
   || { cat "$work/one.log"; echo "the one-process run failed"; exit 1; }
 want=$(hashes "$work/one.log")
 echo "one process, uninterrupted: $want"

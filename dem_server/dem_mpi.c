@@ -121,6 +121,22 @@ static int mpi_fail(cm_error *err, int code, const char *what, long step)
     return cm_fail(err, CM_ERR_IO, "step %ld: MPI %s failed: %s", step, what, msg);
 }
 
+/* The first half of a gather to rank 0: every rank's count (MPI_Gather)
+ * and, on rank 0, the displacements of their concatenation in rank order
+ * (the global grain order) and their sum into *total if not NULL (0 on the
+ * other ranks). */
+static int gather_counts(const dist_ctx *d, int cnt, int *counts, int *displ, long *total)
+{
+    int rc = MPI_Gather(&cnt, 1, MPI_INT, counts, 1, MPI_INT, 0, d->comm);
+    long sum = 0;
+    if (rc == MPI_SUCCESS && d->rank == 0)
+        for (int r = 0; r < d->size; r++)
+            displ[r] = (int)sum, sum += counts[r];
+    if (total)
+        *total = sum;
+    return rc;
+}
+
 int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err)
 {
     if (n_cols < ranks)
@@ -440,19 +456,11 @@ static int dist_surf_gather(dem_world *w, cm_error *err)
     dem_surface_pack(w, d->psbuf);
     d->surf_contacts += s->tot.contacts;
     int cnt = (int)n;
-    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+    long total;
+    if ((rc = gather_counts(d, cnt, d->rcount, d->rdispl, &total)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the surface contact counts", w->step);
-    long total = 0;
-    if (d->rank == 0) {
-        for (int r = 0; r < d->size; r++)
-            total += d->rcount[r];
-        if (total > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)total + 1))
-            return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step,
-                           total);
-        d->rdispl[0] = 0;
-        for (int r = 1; r < d->size; r++)
-            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
-    }
+    if (d->rank == 0 && (total > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)total + 1)))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step, total);
     if ((rc = MPI_Gatherv(d->psbuf, cnt, MPI_DOUBLE, d->prbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
         MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the surface contacts", w->step);
@@ -699,13 +707,8 @@ int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
     for (int k = 0; k < n; k++)
         pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
     int cnt = n * (int)rs;
-    if ((rc = MPI_Gather(&cnt, 1, MPI_INT, d->rcount, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+    if ((rc = gather_counts(d, cnt, d->rcount, d->rdispl, NULL)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the grain counts", w->step);
-    if (d->rank == 0) {
-        d->rdispl[0] = 0;
-        for (int r = 1; r < d->size; r++)
-            d->rdispl[r] = d->rdispl[r - 1] + d->rcount[r - 1];
-    }
     if ((rc = MPI_Gatherv(d->sbuf, cnt, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
         MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the grains", w->step);
@@ -827,14 +830,9 @@ int dem_mpi_collect(dem_world *w, cm_error *err)
     }
     int cnt[2] = {n * (int)rs, np * SPRING_REC};
     int *gc = d->rcount, *gd = d->rdispl, *hc = d->hrcount, *hd = d->hrdispl;
-    if ((rc = MPI_Gather(&cnt[0], 1, MPI_INT, gc, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS ||
-        (rc = MPI_Gather(&cnt[1], 1, MPI_INT, hc, 1, MPI_INT, 0, d->comm)) != MPI_SUCCESS)
+    if ((rc = gather_counts(d, cnt[0], gc, gd, NULL)) != MPI_SUCCESS ||
+        (rc = gather_counts(d, cnt[1], hc, hd, NULL)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the grain counts", w->step);
-    if (d->rank == 0) {
-        gd[0] = hd[0] = 0;
-        for (int r = 1; r < d->size; r++)
-            gd[r] = gd[r - 1] + gc[r - 1], hd[r] = hd[r - 1] + hc[r - 1];
-    }
     if ((rc = MPI_Gatherv(d->sbuf, cnt[0], MPI_DOUBLE, d->rbuf, gc, gd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS ||
         (rc = MPI_Gatherv(d->hsbuf, cnt[1], MPI_DOUBLE, d->hrbuf, hc, hd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "gather of the grains and springs", w->step);

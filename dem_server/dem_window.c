@@ -305,15 +305,27 @@ static int append_stretch(dem_window *win, dem_world *w, int *added, double *fra
     return CM_OK;
 }
 
+/* What the wheel at wheel_x asks of the window, the conditions that
+ * dem_window_update acts on and dem_window_pending reports: grains to
+ * remove behind, a stretch to append in front, the frozen grains to
+ * renew (after a change, or when the wheel moved a grain's size). */
+static int cut_due(const dem_window *win, double wheel_x)
+{
+    return wheel_x - win->def.behind - win->st.x_cut >= win->def.shift;
+}
+
+static int front_due(const dem_window *win, double wheel_x) { return win->st.x_front - wheel_x < win->def.ahead; }
+
+static int freeze_due(const dem_window *win, double wheel_x, int changed)
+{
+    return win->def.freeze_distance > 0.0 && (changed || !(fabs(wheel_x - win->st.x_freeze) < win->r_max));
+}
+
 int dem_window_pending(const dem_window *win, double wheel_x, double *freeze_lo, double *freeze_hi)
 {
-    const dem_window_def *d = &win->def;
-    const dem_window_state *st = &win->st;
-    /* the conditions of dem_window_update, in its order */
-    int shift = wheel_x - d->behind - st->x_cut >= d->shift || st->x_front - wheel_x < d->ahead;
-    int freeze = d->freeze_distance > 0.0 && (shift || !(fabs(wheel_x - st->x_freeze) < win->r_max));
-    *freeze_lo = wheel_x - d->freeze_distance, *freeze_hi = wheel_x + d->freeze_distance;
-    return shift ? DEM_WINDOW_SHIFT : freeze ? DEM_WINDOW_FREEZE : DEM_WINDOW_NONE;
+    const int shift = cut_due(win, wheel_x) || front_due(win, wheel_x);
+    *freeze_lo = wheel_x - win->def.freeze_distance, *freeze_hi = wheel_x + win->def.freeze_distance;
+    return shift ? DEM_WINDOW_SHIFT : freeze_due(win, wheel_x, shift) ? DEM_WINDOW_FREEZE : DEM_WINDOW_NONE;
 }
 
 int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *err)
@@ -321,7 +333,7 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
     const dem_window_def *d = &win->def;
     dem_window_state *st = &win->st;
     int changed = 0;
-    if (wheel_x - d->behind - st->x_cut >= d->shift) {
+    if (cut_due(win, wheel_x)) {
         double cut = wheel_x - d->behind;
         st->x_cut = cut;
         int removed = 0;
@@ -338,7 +350,7 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
         cm_log_info("window: wheel at x = %.3f m: removed %d grains behind x = %.3f m, back wall to %.3f m; %d grains",
                     wheel_x, removed, cut, lo, g->n);
     }
-    while (st->x_front - wheel_x < d->ahead) {
+    while (front_due(win, wheel_x)) {
         int added = 0;
         double fraction = 1.0, f_old = st->x_front, overlap = 0.0;
         int rc = append_stretch(win, w, &added, &fraction, &overlap, err);
@@ -353,7 +365,7 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
                     "%d grains",
                     wheel_x, added, f_old, st->x_front, 100.0 * fraction, 100.0 * overlap, w->g.n);
     }
-    if (d->freeze_distance > 0.0 && (changed || !(fabs(wheel_x - st->x_freeze) < win->r_max))) {
+    if (freeze_due(win, wheel_x, changed)) {
         st->x_freeze = wheel_x;
         dem_freeze_outside_x(w, wheel_x - d->freeze_distance, wheel_x + d->freeze_distance);
     }

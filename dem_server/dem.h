@@ -4,7 +4,8 @@
  * dem_shape_add / dem_grain_add_shape, rotation by Euler's equations with a
  * quaternion, libccd narrow phase; README "Non-spherical grains"), Hertz–Mindlin contacts (normal Hertz force with a
  * restitution-calibrated dashpot, Mindlin tangential spring with history and
- * Coulomb cap, optional constant-torque rolling resistance), planar walls and
+ * Coulomb cap, optional rolling resistance: a constant torque or an
+ * elastic–plastic spring), planar walls and
  * one deformable triangle surface (the FE tire's outer skin), integrated with
  * velocity Verlet (paper eqs. 4–5) for translation and directly in ω with a
  * unit quaternion for orientation.
@@ -48,7 +49,7 @@ typedef struct dem_material {
     double poisson;          /* Poisson's ratio ν, [0, 0.5) */
     double restitution;      /* requested normal coefficient of restitution e, (0, 1] */
     double friction;         /* Coulomb sliding friction coefficient μ, >= 0 */
-    double rolling_friction; /* constant-torque rolling resistance μ_r (torque μ_r R* Fn); 0 = off */
+    double rolling_friction; /* rolling resistance μ_r (largest torque μ_r R* Fn, enum dem_rolling_model); 0 = off */
 } dem_material;
 
 /* Pair values mix the two materials: E*, G* after Hertz/Mindlin (eqs. 21, 26),
@@ -61,6 +62,23 @@ enum dem_damping_model {
     DEM_DAMPING_CALIBRATED = 0,
     /* Plain ln(e) form (Tsuji 1992 / LIGGGHTS): achieved e overshoots. */
     DEM_DAMPING_LN_E = 1
+};
+
+/* How rolling resistance acts (dem_contact.h has the laws). */
+enum dem_rolling_model {
+    /* A torque μ_r R* F_n against the relative angular velocity, limited so
+     * that it cannot reverse it within a step (Zhou et al. 1999, LIGGGHTS'
+     * "cdt"). It cannot hold a torque at rest: a grain under a steady torque
+     * below the limit turns at ω = T dt / I, so a bed's strength depends on
+     * the step (README "Rolling resistance"). */
+    DEM_ROLLING_CONSTANT_TORQUE = 0,
+    /* An elastic–plastic spring with a dashpot on the relative rotation, its
+     * torque capped at μ_r R* F_n (Iwashita & Oda 1998; Ai et al. 2011 model
+     * C, LIGGGHTS' "epsd"): below the cap a grain stands still, whatever the
+     * step. History per contact, like the tangential spring. Sphere–sphere
+     * and sphere–wall contacts; the tire surface and shaped grains keep the
+     * constant torque. */
+    DEM_ROLLING_SPRING = 1
 };
 
 /* ---- World ------------------------------------------------------------ */
@@ -78,6 +96,7 @@ typedef struct dem_world_def {
     bool allow_unstable;     /* true: a dt above the limits only warns */
     int reorder_every;       /* re-sort grains by cell (and tag inside a cell) every N neighbour rebuilds
                                 (0 = never); 1 (the default) is needed by a distributed run */
+    int rolling_model;       /* enum dem_rolling_model (default constant torque) */
     bool portable_kernel;    /* true: the pair kernel's portable path even where the CPU has AVX2 (the
                                 same bits either way; for the test that shows it) */
 } dem_world_def;

@@ -129,7 +129,7 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
                {"/grains/x0", g->x0, 1},        {"/grains/y0", g->y0, 1},        {"/grains/z0", g->z0, 1},
                {"/grains/q", g->q, 4},          {"/grains/sc", g->sc, 1},        {"/grains/inertia", g->inertia, 3},
                {"/grains/angmom", g->angmom, 3},
-               {"/grains/wall_hist", g->wall_hist, 3 * (size_t)w->wall_stride}};
+               {"/grains/wall_hist", g->wall_hist, (size_t)w->hist_stride * w->wall_stride}};
     for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
         cm_ckpt_f64(ck, dbl[k].name, dbl[k].p, dbl[k].per * n);
     cm_ckpt_i32(ck, "/grains/mat", g->mat, n);
@@ -167,7 +167,9 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
         cm_ckpt_int(ck, "/pairs/hash_count", &h->count);
         cm_ckpt_u64(ck, "/pairs/hash_key", h->key, (size_t)cap);
         hash_rows(ck, h, cap);
-        cm_ckpt_f64(ck, "/pairs/springs", w->hist_val[w->hist_cur], 3 * (size_t)w->n_pairs);
+        /* hist_stride per pair: a checkpoint of the other rolling model is
+         * refused by the dataset's size, naming it */
+        cm_ckpt_f64(ck, "/pairs/springs", w->hist_val[w->hist_cur], (size_t)w->hist_stride * w->n_pairs);
         if (!ck->writing && ck->rc == CM_OK) /* which way each spring points: from the pairs read */
             dem_hist_orient(w);
     }

@@ -222,6 +222,7 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
     c->world = dem_world_def_default();
     dem_world_def *d = &c->world;
     static const char *const damping_words[] = {"calibrated", "ln_e", NULL};
+    static const char *const rolling_words[] = {"constant_torque", "spring", NULL}; /* enum dem_rolling_model */
     static const double g_def[3] = {0.0, 0.0, -9.81};
     long threads = 1, max_grains = 0, reorder = d->reorder_every;
     int rc;
@@ -232,6 +233,8 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
         (rc = cm_scene_doubles_opt(s, "dem.gravity", 3, -1e4, 1e4, g_def, d->gravity, err)) ||
         (rc = cm_scene_int_opt(s, "dem.threads", 0, 1024, 1, &threads, err)) ||
         (rc = cm_scene_choice_opt(s, "dem.damping", damping_words, DEM_DAMPING_CALIBRATED, &d->damping, err)) ||
+        (rc = cm_scene_choice_opt(s, "dem.rolling_model", rolling_words, DEM_ROLLING_CONSTANT_TORQUE,
+                                  &d->rolling_model, err)) ||
         (rc = cm_scene_double_opt(s, "dem.impact_velocity", 1e-6, 1e4, d->impact_velocity, &d->impact_velocity,
                                   err)) ||
         (rc = cm_scene_double_opt(s, "dem.dt_safety_rayleigh", 1e-3, 10.0, d->dt_safety_rayleigh,

@@ -37,7 +37,7 @@ int dem_pairs_reserve(dem_world *w, int need)
         return CM_ERR_NOMEM;
     w->pj = a;
     for (int k = 0; k < 2; k++) {
-        double *h = realloc(w->hist_val[k], (size_t)cap * 3 * sizeof *h);
+        double *h = realloc(w->hist_val[k], (size_t)cap * w->hist_stride * sizeof *h);
         if (!h)
             return CM_ERR_NOMEM;
         w->hist_val[k] = h;
@@ -250,24 +250,26 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     const unsigned char *oori = w->hist_ori[w->hist_cur];
     unsigned char *nori = w->hist_ori[1 - w->hist_cur];
+    const int hs = w->hist_stride;
     for (int p = 0; p < w->n_pairs; p++) {
         const int ti = g->tag[w->pi[p]], tj = g->tag[w->pj[p]];
         uint64_t key = dem_pair_key(ti, tj); /* tags survive removals */
         nw->row[dem_hash_insert(nw, key)] = p;
         int o = dem_hash_find(old, key), flip = 0;
-        double *xi = nval + 3 * (size_t)p;
+        double *xi = nval + (size_t)hs * p;
         if (o >= 0) {
             int r = old->row[o];
-            memcpy(xi, oval + 3 * (size_t)r, 3 * sizeof(double));
+            memcpy(xi, oval + (size_t)hs * r, (size_t)hs * sizeof(double));
             flip = oori[r] != (ti < tj); /* a re-sort swapped i and j */
         } else if (w->hist_extra && (o = dem_hash_find(w->hist_extra, key)) >= 0) {
-            memcpy(xi, w->hist_extra_val + 3 * (size_t)w->hist_extra->row[o], 3 * sizeof(double));
+            memcpy(xi, w->hist_extra_val + (size_t)hs * w->hist_extra->row[o], (size_t)hs * sizeof(double));
             flip = ti > tj; /* received lower tag first */
         } else {
-            xi[0] = xi[1] = xi[2] = 0.0;
+            memset(xi, 0, (size_t)hs * sizeof(double));
         }
         if (flip)
-            xi[0] = -xi[0], xi[1] = -xi[1], xi[2] = -xi[2];
+            for (int k = 0; k < hs; k++)
+                xi[k] = -xi[k];
         nori[p] = ti < tj;
     }
     w->hist_cur = 1 - w->hist_cur;
@@ -308,7 +310,7 @@ int dem_world_prepare(dem_world *w, cm_error *err)
     w->skin = w->def.skin > 0.0 ? w->def.skin : 0.3 * w->r_min;
     if (w->wall_stride != w->n_walls) { /* walls added: new layout, springs restart */
         w->wall_stride = w->n_walls;
-        memset(g->wall_hist, 0, (size_t)g->cap * DEM_MAX_WALLS * 3 * sizeof(double));
+        memset(g->wall_hist, 0, (size_t)g->cap * DEM_MAX_WALLS * w->hist_stride * sizeof(double));
         memset(g->wall_mask, 0, (size_t)g->cap * sizeof *g->wall_mask);
     }
     int rc = dem_check_dt(w, err);

@@ -50,14 +50,28 @@ typedef struct dist_ctx {
     int *order;                /* cap: the kept slots at a rebuild */
 } dist_ctx;
 
-enum { REC_FIXED = 39, SPRING_REC = 5 };
+enum { REC_FIXED = 39, SPRING_REC_MAX = 2 + DEM_HIST_MAX };
 
 /* surface history per grain (dem_surface.h), after the wall springs */
 enum { SURF_HIST = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE };
 
+/* the wall springs of one grain */
+static size_t wall_hist_size(const dem_world *w) { return (size_t)w->hist_stride * w->wall_stride; }
+
 static size_t rec_size(const dem_world *w)
 {
-    return REC_FIXED + 3 * (size_t)w->wall_stride + (w->surf ? SURF_HIST : 0);
+    return REC_FIXED + wall_hist_size(w) + (w->surf ? SURF_HIST : 0);
+}
+
+/* A pair's spring record: the two grains' tags, then its history row
+ * (hist_stride doubles) times sg (-1 turns it to the other grain's side). */
+static int spring_rec(const dem_world *w) { return 2 + w->hist_stride; }
+
+static void spring_record(const dem_world *w, double ta, double tb, double sg, const double *h, double *rec)
+{
+    rec[0] = ta, rec[1] = tb;
+    for (int k = 0; k < w->hist_stride; k++)
+        rec[2 + k] = sg * h[k];
 }
 
 /* Everything a grain carries, as doubles (integers exactly). */
@@ -72,10 +86,10 @@ static void pack_grain(const dem_world *w, int i, double *r)
         g->inertia[3 * i + 2], g->angmom[3 * i], g->angmom[3 * i + 1], g->angmom[3 * i + 2], g->mat[i],
         g->tag[i],   g->frozen[i], g->shape[i], g->wall_mask[i], g->surf_count[i], g->wall_near[i]};
     memcpy(r, v, sizeof v);
-    memcpy(r + REC_FIXED, g->wall_hist + (size_t)i * 3 * w->wall_stride, 3 * (size_t)w->wall_stride * sizeof *r);
+    const size_t wh = wall_hist_size(w);
+    memcpy(r + REC_FIXED, g->wall_hist + i * wh, wh * sizeof *r);
     if (w->surf) /* the tangential springs against the tire travel with the grain */
-        memcpy(r + REC_FIXED + 3 * (size_t)w->wall_stride, w->surf->hist + (size_t)i * SURF_HIST,
-               SURF_HIST * sizeof *r);
+        memcpy(r + REC_FIXED + wh, w->surf->hist + (size_t)i * SURF_HIST, SURF_HIST * sizeof *r);
 }
 
 static void unpack_grain(dem_world *w, int i, const double *r)
@@ -93,10 +107,10 @@ static void unpack_grain(dem_world *w, int i, const double *r)
     g->mat[i] = (int)r[32], g->tag[i] = (int)r[33], g->frozen[i] = (unsigned char)r[34];
     g->shape[i] = (int)r[35], g->wall_mask[i] = (uint32_t)r[36], g->surf_count[i] = (int)r[37];
     g->wall_near[i] = (uint32_t)r[38];
-    memcpy(g->wall_hist + (size_t)i * 3 * w->wall_stride, r + REC_FIXED, 3 * (size_t)w->wall_stride * sizeof *r);
+    const size_t wh = wall_hist_size(w);
+    memcpy(g->wall_hist + i * wh, r + REC_FIXED, wh * sizeof *r);
     if (w->surf) /* a gathered view without a surface skips them */
-        memcpy(w->surf->hist + (size_t)i * SURF_HIST, r + REC_FIXED + 3 * (size_t)w->wall_stride,
-               SURF_HIST * sizeof *r);
+        memcpy(w->surf->hist + (size_t)i * SURF_HIST, r + REC_FIXED + wh, SURF_HIST * sizeof *r);
 }
 
 static int grow(double **a, size_t *cap, size_t need)
@@ -261,8 +275,9 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     }
     const long n_out = d->sdispl[d->size - 1] + d->scount[d->size - 1];
     const long h_out = d->hdispl[d->size - 1] + d->hcount[d->size - 1];
+    const int sr = spring_rec(w);
     if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n_out * rs) ||
-        grow(&d->hsbuf, &d->hsbuf_cap, (size_t)h_out * SPRING_REC))
+        grow(&d->hsbuf, &d->hsbuf_cap, (size_t)h_out * sr))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld migrating grains", w->step, n_out);
     memcpy(d->hwhere, d->sdispl, (size_t)d->size * sizeof *d->hwhere);
     for (int i = own_lo; i < own_hi; i++)
@@ -275,12 +290,12 @@ static int dist_rebuild(dem_world *w, cm_error *err)
         int rb = b >= own_lo && b < own_hi ? d->dest[b] : d->rank;
         /* lower tag first: the spring of i relative to j, negated if i is the higher */
         const double sg = g->tag[a] < g->tag[b] ? 1.0 : -1.0;
-        const double rec[SPRING_REC] = {g->tag[a], g->tag[b], sg * hv[3 * (size_t)p], sg * hv[3 * (size_t)p + 1],
-                                        sg * hv[3 * (size_t)p + 2]};
+        double rec[SPRING_REC_MAX];
+        spring_record(w, g->tag[a], g->tag[b], sg, hv + (size_t)w->hist_stride * p, rec);
         if (ra != d->rank)
-            memcpy(d->hsbuf + (size_t)d->hwhere[ra]++ * SPRING_REC, rec, sizeof rec);
+            memcpy(d->hsbuf + (size_t)d->hwhere[ra]++ * sr, rec, (size_t)sr * sizeof *rec);
         if (rb != d->rank && rb != ra)
-            memcpy(d->hsbuf + (size_t)d->hwhere[rb]++ * SPRING_REC, rec, sizeof rec);
+            memcpy(d->hsbuf + (size_t)d->hwhere[rb]++ * sr, rec, (size_t)sr * sizeof *rec);
     }
     if (d->distributed)
         d->migrated += n_out, d->springs_sent += h_out;
@@ -300,13 +315,13 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     if (n_keep + n_in > g->cap)
         return cm_fail(err, CM_ERR_RANGE, "step %ld: rank %d would hold %ld grains, more than max_grains = %d",
                        w->step, d->rank, n_keep + n_in, g->cap);
-    if (grow(&d->rbuf, &d->rbuf_cap, (size_t)n_in * rs) || grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h_in * SPRING_REC))
+    if (grow(&d->rbuf, &d->rbuf_cap, (size_t)n_in * rs) || grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h_in * sr))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld arriving grains", w->step, n_in);
     /* counts and displacements in doubles (records are whole doubles) */
     for (int r = 0; r < d->size; r++) {
         d->scount[r] *= (int)rs, d->sdispl[r] *= (int)rs, d->rcount[r] *= (int)rs, d->rdispl[r] *= (int)rs;
-        d->hcount[r] *= SPRING_REC, d->hdispl[r] *= SPRING_REC;
-        d->hrcount[r] *= SPRING_REC, d->hrdispl[r] *= SPRING_REC;
+        d->hcount[r] *= sr, d->hdispl[r] *= sr;
+        d->hrcount[r] *= sr, d->hrdispl[r] *= sr;
     }
     if ((rc = MPI_Alltoallv(d->sbuf, d->scount, d->sdispl, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE,
                             d->comm)) != MPI_SUCCESS ||
@@ -318,14 +333,16 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     for (long k = 0; k < n_in; k++)
         unpack_grain(w, g->n++, d->rbuf + (size_t)k * rs);
     /* springs that came with them, for the carry-over of the new list */
-    if (grow(&d->extra_val, &d->extra_cap, 3 * (size_t)(h_in ? h_in : 1)) || dem_hash_reset(&d->extra, (int)h_in))
+    const int hs = w->hist_stride;
+    if (grow(&d->extra_val, &d->extra_cap, (size_t)hs * (size_t)(h_in ? h_in : 1)) ||
+        dem_hash_reset(&d->extra, (int)h_in))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld arriving springs", w->step, h_in);
     for (long k = 0; k < h_in; k++) {
-        const double *r = d->hrbuf + (size_t)k * SPRING_REC;
+        const double *r = d->hrbuf + (size_t)k * sr;
         int s = dem_hash_insert(&d->extra, dem_pair_key((int)r[0], (int)r[1]));
         if (d->extra.row[s] < 0) { /* a pair sent by both its grains' ranks holds the same spring */
             d->extra.row[s] = (int)k;
-            memcpy(d->extra_val + 3 * (size_t)k, r + 2, 3 * sizeof *r);
+            memcpy(d->extra_val + (size_t)hs * k, r + 2, (size_t)hs * sizeof *r);
         }
     }
     /* 5. ghosts: the owned grains of the first column to rank - 1, of the
@@ -695,8 +712,9 @@ int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
     if ((rc = MPI_Reduce(counts, sums, 2, MPI_INT, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "reduce of the grain counts", w->step);
     total = sums[0];
-    if (d->rank == 0)
-        ok = view && total <= view->g.cap && !grow(&d->rbuf, &d->rbuf_cap, (size_t)total * rs);
+    if (d->rank == 0) /* the view holds the same history layout (made from the same scene) */
+        ok = view && total <= view->g.cap && view->hist_stride == w->hist_stride &&
+             !grow(&d->rbuf, &d->rbuf_cap, (size_t)total * rs);
     if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs))
         ok = 0;
     int okall = 0;
@@ -753,7 +771,7 @@ static int slot_of_tag(const dem_world *w, const dist_ctx *d, int n, int tag)
     return -1;
 }
 
-/* Rank 0 after a collect: the springs recs[0 .. n) (SPRING_REC each, lower
+/* Rank 0 after a collect: the springs recs[0 .. n) (spring_rec doubles each, lower
  * tag first, a pair possibly twice: from both ranks of an owned–ghost pair)
  * installed as the current list's history: a list of the pairs (never
  * computed with: the world is rebuilt before its next pair step) whose
@@ -773,7 +791,7 @@ static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n
     unsigned char *ori = w->hist_ori[w->hist_cur];
     int np = 0;
     for (long k = 0; k < n; k++) {
-        const double *r = recs + (size_t)k * SPRING_REC;
+        const double *r = recs + (size_t)k * spring_rec(w);
         const uint64_t key = dem_pair_key((int)r[0], (int)r[1]);
         int s = dem_hash_insert(&d->extra, key);
         if (d->extra.row[s] >= 0) /* sent by both ranks of the pair: the same spring */
@@ -783,7 +801,7 @@ static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n
         if (a < 0 || b < 0) /* a removed grain's pair */
             continue;
         w->pi[np] = a, w->pj[np] = b; /* lower tag first: ori 1 */
-        memcpy(hv + 3 * (size_t)np, r + 2, 3 * sizeof *hv);
+        memcpy(hv + (size_t)w->hist_stride * np, r + 2, (size_t)w->hist_stride * sizeof *hv);
         ori[np] = 1;
         w->hist[w->hist_cur].row[dem_hash_insert(&w->hist[w->hist_cur], key)] = np;
         np++;
@@ -803,15 +821,16 @@ int dem_mpi_collect(dem_world *w, cm_error *err)
     const size_t rs = rec_size(w);
     const int n = w->own_hi - w->own_lo, np = w->n_pairs;
     int rc, ok = 1;
-    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs + 1) || grow(&d->hsbuf, &d->hsbuf_cap, (size_t)np * SPRING_REC + 1))
+    const int sr = spring_rec(w);
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs + 1) || grow(&d->hsbuf, &d->hsbuf_cap, (size_t)np * sr + 1))
         ok = 0;
     long mine[2] = {n, np}, tot[2] = {0, 0};
     if ((rc = MPI_Reduce(mine, tot, 2, MPI_LONG, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "reduce of the grain counts", w->step);
     if (d->rank == 0)
-        ok = ok && tot[0] <= g->cap && tot[0] * (long)rs <= INT_MAX && tot[1] * SPRING_REC <= INT_MAX &&
+        ok = ok && tot[0] <= g->cap && tot[0] * (long)rs <= INT_MAX && tot[1] * sr <= INT_MAX &&
              !grow(&d->rbuf, &d->rbuf_cap, (size_t)tot[0] * rs + 1) &&
-             !grow(&d->hrbuf, &d->hrbuf_cap, (size_t)tot[1] * SPRING_REC + 1);
+             !grow(&d->hrbuf, &d->hrbuf_cap, (size_t)tot[1] * sr + 1);
     int okall = 0;
     MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
     if (!okall)
@@ -822,13 +841,11 @@ int dem_mpi_collect(dem_world *w, cm_error *err)
     const double *hv = w->hist_val[w->hist_cur];
     for (int p = 0; p < np; p++) { /* lower tag first, as migrating springs */
         int a = w->pi[p], b = w->pj[p];
-        const double sg = g->tag[a] < g->tag[b] ? 1.0 : -1.0;
-        double *r = d->hsbuf + (size_t)p * SPRING_REC;
-        r[0] = g->tag[a] < g->tag[b] ? g->tag[a] : g->tag[b];
-        r[1] = g->tag[a] < g->tag[b] ? g->tag[b] : g->tag[a];
-        r[2] = sg * hv[3 * (size_t)p], r[3] = sg * hv[3 * (size_t)p + 1], r[4] = sg * hv[3 * (size_t)p + 2];
+        const int lower = g->tag[a] < g->tag[b];
+        spring_record(w, lower ? g->tag[a] : g->tag[b], lower ? g->tag[b] : g->tag[a], lower ? 1.0 : -1.0,
+                      hv + (size_t)w->hist_stride * p, d->hsbuf + (size_t)p * sr);
     }
-    int cnt[2] = {n * (int)rs, np * SPRING_REC};
+    int cnt[2] = {n * (int)rs, np * sr};
     int *gc = d->rcount, *gd = d->rdispl, *hc = d->hrcount, *hd = d->hrdispl;
     if ((rc = gather_counts(d, cnt[0], gc, gd, NULL)) != MPI_SUCCESS ||
         (rc = gather_counts(d, cnt[1], hc, hd, NULL)) != MPI_SUCCESS)
@@ -886,17 +903,17 @@ int dem_mpi_rejoin(dem_world *w, cm_error *err)
             const dem_hash *h = &w->hist[w->hist_cur];
             const double *hv = w->hist_val[w->hist_cur];
             const unsigned char *ori = w->hist_ori[w->hist_cur];
-            if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * SPRING_REC + 1))
+            const int sr = spring_rec(w);
+            if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * sr + 1))
                 return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d springs", w->step, h->count);
             long m = 0;
             for (int s = 0; s < h->cap; s++) {
                 if (h->key[s] == DEM_HASH_EMPTY || h->row[s] < 0)
                     continue;
                 const int r = h->row[s];
-                const double sg = ori[r] ? 1.0 : -1.0; /* to lower tag first */
-                double *rec = d->hrbuf + (size_t)m++ * SPRING_REC;
-                rec[0] = (double)(uint32_t)(h->key[s] >> 32), rec[1] = (double)(uint32_t)(h->key[s] & 0xffffffffu);
-                rec[2] = sg * hv[3 * (size_t)r], rec[3] = sg * hv[3 * (size_t)r + 1], rec[4] = sg * hv[3 * (size_t)r + 2];
+                spring_record(w, (double)(uint32_t)(h->key[s] >> 32), (double)(uint32_t)(h->key[s] & 0xffffffffu),
+                              ori[r] ? 1.0 : -1.0 /* to lower tag first */, hv + (size_t)w->hist_stride * r,
+                              d->hrbuf + (size_t)m++ * sr);
             }
             if ((rc = install_springs(w, d, d->hrbuf, m, err)))
                 return rc;

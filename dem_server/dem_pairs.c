@@ -29,9 +29,10 @@
 typedef struct pair_arrays {
     const double *x, *y, *z, *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i;
     const int *mat, *pi, *pj;
-    double *hist;
+    double *hist;       /* hs per pair (dem_world.hist_stride) */
     dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
     double dt;
+    int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -39,7 +40,8 @@ static pair_arrays pair_arrays_of(dem_world *w)
     const dem_grains *g = &w->g;
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
-                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt};
+                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt,
+                     w->def.rolling_model == DEM_ROLLING_SPRING};
     return a;
 }
 
@@ -49,12 +51,16 @@ static pair_arrays pair_arrays_of(dem_world *w)
 static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g, int p, double *restrict out)
 {
     int i = g->pi[p], j = g->pj[p];
-    double *xi = g->hist + 3 * (size_t)p;
+    const int hs = g->roll_spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
+    double *xi = g->hist + (size_t)hs * p;
     double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
     double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
     if (d2 >= rs * rs || d2 == 0.0) { /* coincident centres: no normal, skip */
-        if (xi[0] != 0.0 || xi[1] != 0.0 || xi[2] != 0.0)
-            xi[0] = xi[1] = xi[2] = 0.0;
+        int held = 0;
+        for (int k = 0; k < hs; k++)
+            held |= xi[k] != 0.0;
+        if (held)
+            memset(xi, 0, (size_t)hs * sizeof *xi);
         return 0;
     }
     double d = sqrt(d2);
@@ -76,7 +82,10 @@ static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g
     vec3 nxf = v3_cross(n, F);
     vec3 Ti = v3_scale(nxf, -li), Tj = v3_scale(nxf, -lj);
     if (cf->mu_roll > 0.0) {
-        vec3 tr = dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), g->dt);
+        vec3 tr = g->roll_spring
+                      ? dem_rolling_spring(cf, R, delta, fn, v3_sub(wi, wj), 3.5 / (g->inv_i[i] + g->inv_i[j]),
+                                           g->dt, xi + DEM_HIST_TANGENTIAL)
+                      : dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), g->dt);
         Ti = v3_add(Ti, tr);
         Tj = v3_sub(Tj, tr);
     }
@@ -234,6 +243,7 @@ typedef struct pair_batch {
     double fx[BATCH], fy[BATCH], fz[BATCH];
     double tix[BATCH], tiy[BATCH], tiz[BATCH], tjx[BATCH], tjy[BATCH], tjz[BATCH];
     double sx[BATCH], sy[BATCH], sz[BATCH];
+    double ux[BATCH], uy[BATCH], uz[BATCH]; /* the new rolling rotation (spring model) */
 } pair_batch;
 
 /* Coefficients of every material pair in structure-of-arrays, indexed by
@@ -259,10 +269,13 @@ static void coef_table_fill(const dem_world *w, coef_table *t)
         }
 }
 
+/* rolling: 0 none, 1 the constant torque, 2 the spring (whose history
+ * rows are DEM_HIST_MAX long, also where no pair rolls) */
 static inline __attribute__((always_inline)) void batch_forces_body(const pair_arrays *in, const coef_table *ct,
                                                                      pair_batch *b, const int rolling,
                                                                      const int uniform)
 {
+    const int hs = rolling == 2 ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     const double *restrict r = in->r, *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
     const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
     const double *restrict inv_m = in->inv_m, *restrict inv_i = in->inv_i, *restrict hist = in->hist;
@@ -274,13 +287,14 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
     double *restrict otix = b->tix, *restrict otiy = b->tiy, *restrict otiz = b->tiz;
     double *restrict otjx = b->tjx, *restrict otjy = b->tjy, *restrict otjz = b->tjz;
     double *restrict osx = b->sx, *restrict osy = b->sy, *restrict osz = b->sz;
+    double *restrict oux = b->ux, *restrict ouy = b->uy, *restrict ouz = b->uz;
     const double dt = in->dt;
     const int n = b->n;
 #pragma omp simd
     for (int k = 0; k < n; k++) {
         /* uniform: one material pair in the batch, its coefficients loaded
          * once for all lanes instead of gathered lane by lane */
-        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k], p3 = 3 * bp[k];
+        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k], p3 = hs * bp[k];
         const double ex = bex[k], ey = bey[k], ez = bez[k];
         const double ri = r[i], rj = r[j], rs = ri + rj;
         double d = sqrt(bd2[k]);
@@ -331,7 +345,27 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
         double tix = cx * -li, tiy = cy * -li, tiz = cz * -li;
         double tjx = cx * -lj, tjy = cy * -lj, tjz = cz * -lj;
-        if (rolling) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
+        if (rolling == 2) { /* dem_rolling_spring, where the pair's mu_roll > 0 */
+            const int roll = cmr[c] > 0.0;
+            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
+            double mrR = cmr[c] * R;
+            double kr = 1.5 * sn * mrR * mrR;
+            double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(3.5 / (inv_i[i] + inv_i[j]) * kr);
+            double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
+            double ux = dt * rwx + u0x, uy = dt * rwy + u0y, uz = dt * rwz + u0z;
+            double mx = ux * -kr - rwx * cr, my = uy * -kr - rwy * cr, mz = uz * -kr - rwz * cr;
+            double m2 = mx * mx + my * my + mz * mz;
+            double mmax = mrR * f_n;
+            double mk = mmax / sqrt(m2); /* used only where rolling, so m2 > 0 */
+            double inv_kr = -1.0 / kr;
+            if (m2 > mmax * mmax) { /* rolling: the capped torque, the rotation that carries it alone */
+                mx = mx * mk, my = my * mk, mz = mz * mk;
+                ux = kr > 0.0 ? mx * inv_kr : 0.0, uy = kr > 0.0 ? my * inv_kr : 0.0, uz = kr > 0.0 ? mz * inv_kr : 0.0;
+            }
+            oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
+            tix = roll ? tix + mx : tix, tiy = roll ? tiy + my : tiy, tiz = roll ? tiz + mz : tiz;
+            tjx = roll ? tjx - mx : tjx, tjy = roll ? tjy - my : tjy, tjz = roll ? tjz - mz : tjz;
+        } else if (rolling) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
             double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
             double wn = sqrt(rwx * rwx + rwy * rwy + rwz * rwz);
             double t = cmr[c] * R * f_n;
@@ -358,12 +392,18 @@ static inline int batch_uniform(const pair_batch *b)
     return same;
 }
 
-/* The four instances of the loop: with or without rolling resistance, one
- * material pair or several (inlined into each instruction-set build). */
+/* The six instances of the loop: the rolling spring, the constant torque
+ * or no rolling resistance; one material pair or several (inlined into each
+ * instruction-set build). */
 static inline __attribute__((always_inline)) void batch_forces_dispatch(const pair_arrays *in, const coef_table *ct,
                                                                          pair_batch *b)
 {
-    if (batch_uniform(b)) {
+    if (in->roll_spring) {
+        if (batch_uniform(b))
+            batch_forces_body(in, ct, b, 2, 1);
+        else
+            batch_forces_body(in, ct, b, 2, 0);
+    } else if (batch_uniform(b)) {
         if (ct->rolling)
             batch_forces_body(in, ct, b, 1, 1);
         else
@@ -400,17 +440,43 @@ static batch_fn batch_kernel(const dem_world *w)
 
 /* The batch's springs back into the history and its forces into the grains,
  * in pair order. */
-static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_batch *b)
+static inline __attribute__((always_inline)) void batch_scatter_body(const pair_arrays *a, const force_sums *s,
+                                                                      const pair_batch *b, const int spring)
 {
+    const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     for (int k = 0; k < b->n; k++) {
         int p = b->p[k], i = b->i[k], j = b->j[k];
-        double *xi = a->hist + 3 * (size_t)p;
+        double *xi = a->hist + (size_t)hs * p;
         xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
+        if (spring)
+            xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
         double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
                                 b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
         add_i(s, i, f);
         add_j(s, j, f);
     }
+}
+
+/* Its two instances, out of line (the walks' loops stay small). */
+static __attribute__((noinline)) void batch_scatter_tangential(const pair_arrays *a, const force_sums *s,
+                                                               const pair_batch *b)
+{
+    batch_scatter_body(a, s, b, 0);
+}
+
+static __attribute__((noinline)) void batch_scatter_spring(const pair_arrays *a, const force_sums *s,
+                                                           const pair_batch *b)
+{
+    batch_scatter_body(a, s, b, 1);
+}
+
+static inline __attribute__((always_inline)) void batch_scatter(const pair_arrays *a, const force_sums *s,
+                                                                 const pair_batch *b, const int spring)
+{
+    if (spring)
+        batch_scatter_spring(a, s, b);
+    else
+        batch_scatter_tangential(a, s, b);
 }
 
 /* ---- the stage --------------------------------------------------------- */
@@ -424,47 +490,58 @@ static void batch_scatter(const pair_arrays *a, const force_sums *s, const pair_
  * apart. Returns 1 in contact. */
 static inline __attribute__((always_inline)) int candidate(const pair_arrays *a, const force_sums *s,
                                                             const coef_table *ct, batch_fn batch_forces,
-                                                            pair_batch *b, int p)
+                                                            pair_batch *b, int p, const int spring)
 {
+    const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     const int i = a->pi[p], j = a->pj[p];
     const double ex = a->x[i] - a->x[j], ey = a->y[i] - a->y[j], ez = a->z[i] - a->z[j];
     const double d2 = ex * ex + ey * ey + ez * ez, rs = a->r[i] + a->r[j];
     const int apart = (d2 >= rs * rs) | (d2 == 0.0);
-    double *xi = a->hist + 3 * (size_t)p;
-    if (apart & ((xi[0] != 0.0) | (xi[1] != 0.0) | (xi[2] != 0.0)))
+    double *xi = a->hist + (size_t)hs * p;
+    int held = (xi[0] != 0.0) | (xi[1] != 0.0) | (xi[2] != 0.0);
+    if (spring)
+        held |= (xi[3] != 0.0) | (xi[4] != 0.0) | (xi[5] != 0.0);
+    if (apart & held) {
         xi[0] = xi[1] = xi[2] = 0.0;
+        if (spring)
+            xi[3] = xi[4] = xi[5] = 0.0;
+    }
     const int k = b->n;
     b->p[k] = p, b->i[k] = i, b->j[k] = j, b->c[k] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
     b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
     b->n = k + !apart;
     if (b->n == BATCH) {
         batch_forces(a, ct, b);
-        batch_scatter(a, s, b);
+        batch_scatter(a, s, b, spring);
         b->n = 0;
     }
     return !apart;
 }
 
-static inline void batch_flush(const pair_arrays *a, const force_sums *s, const coef_table *ct,
-                               batch_fn batch_forces, pair_batch *b)
+static inline __attribute__((always_inline)) void batch_flush(const pair_arrays *a, const force_sums *s,
+                                                              const coef_table *ct, batch_fn batch_forces,
+                                                              pair_batch *b, const int spring)
 {
     if (b->n > 0) {
         batch_forces(a, ct, b);
-        batch_scatter(a, s, b);
+        batch_scatter(a, s, b, spring);
         b->n = 0;
     }
 }
 
-/* One thread: every active pair in ascending p (the plain loop). */
-static int walk_all(const pair_arrays *in, const force_sums *s, const coef_table *ct, batch_fn batch_forces, int np)
+/* One thread: every active pair in ascending p (the plain loop). spring:
+ * the history rows of the rolling spring (a constant: two instances). */
+static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in, const force_sums *s,
+                                                           const coef_table *ct, batch_fn batch_forces, int np,
+                                                           const int spring)
 {
     const pair_arrays a = *in;
     pair_batch b;
     b.n = 0;
     int contacts = 0;
     for (int p = 0; p < np; p++)
-        contacts += candidate(&a, s, ct, batch_forces, &b, p);
-    batch_flush(&a, s, ct, batch_forces, &b);
+        contacts += candidate(&a, s, ct, batch_forces, &b, p, spring);
+    batch_flush(&a, s, ct, batch_forces, &b, spring);
     return contacts;
 }
 
@@ -473,8 +550,9 @@ static int walk_all(const pair_arrays *in, const force_sums *s, const coef_table
  * Pairs in contact go through batches; a stored cross contribution first
  * flushes the batch, so that each grain still adds in ascending p. Returns
  * the contacts of the block's own pairs. */
-static int walk_block(const pair_arrays *in, const force_sums *s, const coef_table *ct, batch_fn batch_forces,
-                      const dem_pair_plan *pl, int t)
+static inline __attribute__((always_inline)) int walk_block(const pair_arrays *in, const force_sums *s,
+                                                             const coef_table *ct, batch_fn batch_forces,
+                                                             const dem_pair_plan *pl, int t, const int spring)
 {
     const pair_arrays a = *in;
     const int *own = pl->own, *cross = pl->cross, *inc = pl->in;
@@ -489,7 +567,7 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const coef_tab
     for (; k < ke || m < me;) {
         int p = k < ke ? own[k] : INT_MAX;
         if (p_in < p) { /* a cross pair arriving at its j */
-            batch_flush(&a, s, ct, batch_forces, &b);
+            batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = inc[m++];
             if (pl->con[c])
                 add_j(s, a.pj[cross[c]], pl->cf + (size_t)DEM_PAIR_F * c);
@@ -498,7 +576,7 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const coef_tab
         }
         k++;
         if (p == p_cc) { /* own cross pair: computed in phase A */
-            batch_flush(&a, s, ct, batch_forces, &b);
+            batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = cc++;
             if (pl->con[c]) {
                 add_i(s, a.pi[p], pl->cf + (size_t)DEM_PAIR_F * c);
@@ -507,9 +585,9 @@ static int walk_block(const pair_arrays *in, const force_sums *s, const coef_tab
             p_cc = cc < ce ? cross[cc] : INT_MAX;
             continue;
         }
-        contacts += candidate(&a, s, ct, batch_forces, &b, p);
+        contacts += candidate(&a, s, ct, batch_forces, &b, p, spring);
     }
-    batch_flush(&a, s, ct, batch_forces, &b);
+    batch_flush(&a, s, ct, batch_forces, &b, spring);
     return contacts;
 }
 
@@ -538,7 +616,7 @@ static int stage_pairs_shaped(dem_world *w)
         }
         for (int p = lo; p < hi; p++) {
             int i = w->pi[p], j = w->pj[p];
-            double *xi = w->hist_val[w->hist_cur] + 3 * (size_t)p;
+            double *xi = w->hist_val[w->hist_cur] + (size_t)w->hist_stride * p;
             if ((g->shape[i] & g->shape[j]) < 0) { /* both -1: spheres */
                 double f[DEM_PAIR_F];
                 if (pair_force(&pa, p, f)) {
@@ -575,7 +653,8 @@ int dem_stage_pairs(dem_world *w)
     coef_table_fill(w, &ct);
     const batch_fn bf = batch_kernel(w);
     if (nt == 1)
-        return walk_all(&a, &s, &ct, bf, w->n_active_pairs);
+        return a.roll_spring ? walk_all(&a, &s, &ct, bf, w->n_active_pairs, 1)
+                             : walk_all(&a, &s, &ct, bf, w->n_active_pairs, 0);
     const dem_pair_plan *pl = &w->plan;
     const int nb = pl->n_blocks;
     int contacts = 0;
@@ -595,7 +674,7 @@ int dem_stage_pairs(dem_world *w)
 #pragma omp for schedule(dynamic, 1) nowait
 #endif
         for (int t = 0; t < nb; t++) /* phase B */
-            contacts += walk_block(&a, &s, &ct, bf, pl, t);
+            contacts += a.roll_spring ? walk_block(&a, &s, &ct, bf, pl, t, 1) : walk_block(&a, &s, &ct, bf, pl, t, 0);
     }
     return contacts;
 }

@@ -50,7 +50,8 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
                                                              const int shaped)
 {
     dem_grains *g = &w->g;
-    const int nw = w->n_walls;
+    const int nw = w->n_walls, hs = w->hist_stride;
+    const int roll_spring = w->def.rolling_model == DEM_ROLLING_SPRING;
     const double dt = w->def.dt;
     const int near_valid = w->walls_near_valid;
     const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
@@ -71,10 +72,10 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             vec3 nrm = v3_load(wl->n);
             double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
             double delta = r - dist;
-            double *xi = g->wall_hist + ((size_t)i * nw + k) * 3;
+            double *xi = g->wall_hist + ((size_t)i * nw + k) * hs;
             if (delta <= 0.0) {
                 if (mask & (1u << k)) {
-                    xi[0] = xi[1] = xi[2] = 0.0;
+                    memset(xi, 0, (size_t)hs * sizeof *xi);
                     mask &= ~(1u << k);
                 }
                 continue;
@@ -99,7 +100,11 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             double fn;
             /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
             vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
-            vec3 T = v3_add(v3_cross(lever, F), dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt));
+            vec3 Tr = !roll_spring  ? dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt)
+                      : cf->mu_roll > 0.0 ? dem_rolling_spring(cf, r, delta, fn, wi, 3.5 / g->inv_i[i], dt,
+                                                               xi + DEM_HIST_TANGENTIAL)
+                                          : v3(0, 0, 0);
+            vec3 T = v3_add(v3_cross(lever, F), Tr);
             g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
             g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
             wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;

@@ -66,6 +66,9 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
         return cm_fail(err, CM_ERR_RANGE, "dem_world_create: %d materials (1..%d)", n_materials, DEM_MAX_MATERIALS);
     if (!(def->dt > 0.0) || def->max_grains < 1)
         return cm_fail(err, CM_ERR_RANGE, "dem_world_create: dt = %g s, max_grains = %d", def->dt, def->max_grains);
+    if (def->rolling_model != DEM_ROLLING_CONSTANT_TORQUE && def->rolling_model != DEM_ROLLING_SPRING)
+        return cm_fail(err, CM_ERR_RANGE, "dem_world_create: rolling model %d (0 constant torque, 1 spring)",
+                       def->rolling_model);
     for (int k = 0; k < n_materials; k++) {
         int rc = check_material(&materials[k], k, err);
         if (rc)
@@ -75,6 +78,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     if (!w)
         return cm_fail(err, CM_ERR_NOMEM, "dem_world_create: out of memory");
     w->def = *def;
+    w->hist_stride = def->rolling_model == DEM_ROLLING_SPRING ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     w->n_mat = n_materials;
     memcpy(w->mat, materials, (size_t)n_materials * sizeof *materials);
     /* pair coefficients; the damping calibration (a few ms) is done once
@@ -123,7 +127,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
             memset(*dbl[k], 0, (size_t)cap * sizeof(double));
         }
     g->q = xcalloc(4 * (size_t)cap, sizeof(double), &bad);
-    g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * 3, sizeof(double), &bad);
+    g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * w->hist_stride, sizeof(double), &bad);
     g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
     g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
     g->wall_near = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
@@ -245,7 +249,8 @@ int dem_grain_add(dem_world *w, const double x[3], double radius, int material, 
     g->slot_of[i] = i;
     g->tag[i] = w->next_tag++;
     g->frozen[i] = 0;
-    memset(g->wall_hist + (size_t)i * w->wall_stride * 3, 0, (size_t)w->wall_stride * 3 * sizeof(double));
+    memset(g->wall_hist + (size_t)i * w->wall_stride * w->hist_stride, 0,
+           (size_t)w->wall_stride * w->hist_stride * sizeof(double));
     g->wall_mask[i] = 0;
     g->surf_count[i] = 0;
     if (w->surf) /* the slot may have held a removed grain */
@@ -431,7 +436,7 @@ void dem_grains_permute(dem_world *w, const int *order)
             memcpy(tmp + 3 * i, d3[k] + 3 * order[i], 3 * sizeof *tmp);
         memcpy(d3[k], tmp, 3 * (size_t)n * sizeof *tmp);
     }
-    const size_t wh = (size_t)w->wall_stride * 3;
+    const size_t wh = (size_t)w->wall_stride * w->hist_stride;
     for (int i = 0; i < n; i++)
         memcpy(tmp + wh * i, g->wall_hist + wh * order[i], wh * sizeof *tmp);
     memcpy(g->wall_hist, tmp, wh * (size_t)n * sizeof *tmp);
@@ -471,7 +476,7 @@ static int grains_compact(dem_world *w, const unsigned char *keep)
     double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
                      g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
     int *ints[] = {g->mat, g->surf_count, g->shape, g->tag};
-    const size_t wh = (size_t)w->wall_stride * 3, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+    const size_t wh = (size_t)w->wall_stride * w->hist_stride, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
     int d = 0;
     for (int i = 0; i < n; i++) {
         if (!keep[i]) {

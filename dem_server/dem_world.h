@@ -53,7 +53,7 @@ typedef struct dem_grains {
     int *tag;          /* stable name of the grain in slot i, never reused (output, contact history keys) */
     unsigned char *frozen; /* 1: not integrated, its pairs with other frozen grains skipped (dem_freeze_outside_x) */
     double *x0, *y0, *z0; /* positions at the last neighbour rebuild */
-    double *wall_hist; /* wall_stride * 3 per grain: tangential springs */
+    double *wall_hist; /* wall_stride * hist_stride per grain: springs, as a pair's */
     uint32_t *wall_mask; /* bit k: the spring of wall k is non-zero (saves reading wall_hist) */
     uint32_t *wall_near; /* bit k: wall k within r + skin at the last neighbour rebuild (valid while walls_near_valid) */
     int *surf_count;   /* surface contacts of the grain in the last step */
@@ -63,6 +63,12 @@ typedef struct dem_grains {
     double *inertia;   /* 3 per grain: principal moments, kg m^2 */
     double *angmom;    /* 3 per grain: angular momentum, world frame, kg m^2/s (shaped grains only) */
 } dem_grains;
+
+/* Contact history per grain–grain pair and per grain–wall contact, in
+ * doubles (dem_world.hist_stride): the tangential spring xi (3) and, with
+ * DEM_ROLLING_SPRING, the rolling rotation (3) after it. Both are of i
+ * relative to j: a swap of i and j negates all of them. */
+enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
 
 /* doubles per stored pair: F on i (3), torque on i (3), torque on j (3) */
 #define DEM_PAIR_F 9
@@ -147,7 +153,8 @@ struct dem_world {
     dem_pair_plan plan; /* how the threads share the pairs (dem_pairs.c) */
     int walls_near_valid; /* g.wall_near is current (0 after grains or walls changed: every wall is tested) */
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
-    double *hist_val[2]; /* tangential springs, 3 per pair, in list order */
+    double *hist_val[2]; /* springs, hist_stride per pair, in list order */
+    int hist_stride;    /* DEM_HIST_TANGENTIAL, or DEM_HIST_MAX with the rolling spring */
     int hist_cur;
     /* per row of hist_val[k]: 1 when the pair's i has the lower tag. A
      * spring is the displacement of i relative to j: when a re-sort swaps a
@@ -201,8 +208,8 @@ struct dem_world {
 
 /* doubles of scratch per grain: the larger of the wall and surface history */
 #define DEM_SCRATCH_PER_GRAIN                                                                         \
-    (DEM_MAX_WALLS * 3 > DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE ? DEM_MAX_WALLS * 3                      \
-                                                             : DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE)
+    (DEM_MAX_WALLS * DEM_HIST_MAX > DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE ? DEM_MAX_WALLS * DEM_HIST_MAX \
+                                                                        : DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE)
 
 _Static_assert(DEM_SCRATCH_PER_GRAIN >= 4, "scratch holds the saved quaternions of shaped grains");
 

@@ -213,7 +213,9 @@ static int replace_once(char *text, size_t cap, const char *from, const char *to
 /* window: the scene with a terrain window that removes grains behind the
  * wheel, appends a stretch in front and freezes the far grains at the start
  * (the wheel travels only millimetres in the test), so that the checkpoints
- * hold a window-changed world and the frozen set keeps being updated. */
+ * hold a window-changed world and the frozen set keeps being updated; and
+ * with the rolling spring (its rotations in the pair and wall springs of the
+ * checkpoint). */
 static int setup_scene(reference *ref, int window)
 {
     snprintf(g_dir, sizeof g_dir, "/tmp/demfem-restart-%d", (int)getpid());
@@ -224,7 +226,9 @@ static int setup_scene(reference *ref, int window)
     if (window && (replace_once(text, sizeof text, "surface_material = \"tread\";",
                                 "surface_material = \"tread\";\n  window = { behind = 0.07; ahead = 0.16; shift = 0.03; "
                                 "sample_margin = 0.03; freeze_distance = 0.035; };") ||
-                   replace_once(text, sizeof text, "material = \"soil\";", "material = \"soil\"; side_walls = true;")))
+                   replace_once(text, sizeof text, "material = \"soil\";", "material = \"soil\"; side_walls = true;") ||
+                   replace_once(text, sizeof text, "friction = 0.6; }", "friction = 0.6; rolling_friction = 0.3; }") ||
+                   replace_once(text, sizeof text, "threads = 1;", "threads = 1;\n  rolling_model = \"spring\";")))
         return 1;
     FILE *f = fopen(g_scene, "w");
     ENSURE(f && fputs(text, f) >= 0 && fclose(f) == 0);

@@ -367,6 +367,131 @@ static int rolling_resistance(void)
     return 0;
 }
 
+/* A sphere on a floor under gravity tilted by th (a slope), rolling
+ * resistance mu_r of the given model, sliding friction high enough to roll
+ * without slip. The mean x position over [t0, t0 + win) and over
+ * [t1, t1 + win) (a held grain rocks on its springs: the means show the
+ * drift), and the x velocity at t0 + win and at t1 + win. */
+static int slope_run(int model, double dt, double th, double mu_r, double t0, double t1, double win, double mean[2],
+                     double vel[2])
+{
+    dem_material m = test_material(5e7, 0.3, 0.3, 1.0);
+    m.rolling_friction = mu_r;
+    dem_world_def d = dem_world_def_default();
+    d.dt = dt;
+    d.max_grains = 1;
+    d.rolling_model = model;
+    d.gravity[0] = 9.81 * sin(th), d.gravity[2] = -9.81 * cos(th);
+    dem_world *w = NULL;
+    cm_error err = {0};
+    ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
+    double mass = sphere_mass(m.density, R0);
+    double dstat = hertz_static_overlap(e_star_same(&m), R0, mass * 9.81 * cos(th));
+    double x[3] = {0, 0, R0 - dstat}, p[3] = {0, 0, 0}, n[3] = {0, 0, 1};
+    ENSURE(dem_grain_add(w, x, R0, 0, NULL, &err) == 0 && dem_wall_add(w, p, n, 0, &err) == 0);
+    const double from[2] = {t0, t1};
+    long step = 0;
+    for (int k = 0; k < 2; k++) {
+        for (; step * dt < from[k]; step++)
+            ENSURE(dem_step(w, &err) == 0);
+        double sum = 0.0;
+        long cnt = 0;
+        dem_grain_state g;
+        for (; step * dt < from[k] + win; step++, cnt++) {
+            ENSURE(dem_step(w, &err) == 0);
+            dem_grain_get(w, 0, &g);
+            sum += g.x[0];
+        }
+        mean[k] = sum / (double)cnt;
+        vel[k] = g.v[0];
+    }
+    dem_world_destroy(&w);
+    return 0;
+}
+
+/* Below the rolling limit (tan th = 0.8 mu_r) the spring model holds the
+ * grain on the slope at two steps: once the start's transient has died out
+ * (it moves the grain ~0.01 um within 0.06 s) no drift between two windows
+ * 0.1 s apart (bound 1 nm). The constant torque cannot hold a torque at
+ * rest: the same grain creeps at a speed proportional to the step (dem.h;
+ * the reason the spring exists), ~1e-5 m/s here. */
+static int rolling_spring_holds_on_slope(void)
+{
+    const double mu_r = 0.3, th = atan(0.8 * mu_r);
+    double creep[2];
+    for (int k = 0; k < 2; k++) {
+        const double dt = k ? 4e-6 : 2e-6;
+        double mean[2], vel[2], cm[2], cv[2];
+        ENSURE(slope_run(DEM_ROLLING_SPRING, dt, th, mu_r, 0.1, 0.2, 0.01, mean, vel) == 0);
+        ENSURE(slope_run(DEM_ROLLING_CONSTANT_TORQUE, dt, th, mu_r, 0.1, 0.2, 0.01, cm, cv) == 0);
+        creep[k] = (cm[1] - cm[0]) / 0.1;
+        printf("dt %g s: spring drift %.3g m (v %.3g m/s); constant torque creeps at %.4g m/s\n", dt,
+               mean[1] - mean[0], vel[1], creep[k]);
+        ENSURE(fabs(mean[1] - mean[0]) < 1e-9);
+        ENSURE(creep[k] > 1e-6); /* 1e-6 m/s: 100x what the bound above allows the spring */
+    }
+    printf("constant torque: creep ratio %.3f for a step ratio of 2\n", creep[1] / creep[0]);
+    ENSURE_REL(creep[1] / creep[0], 2.0, 0.1);
+    return 0;
+}
+
+/* Above the limit (tan th = 2 mu_r) the sphere rolls with the capped torque,
+ * at the same acceleration under either model:
+ * a = (5/7) g (sin th - mu_r cos th) (torque mu_r r m g cos th against
+ * I + m r^2). */
+static int rolling_spring_rolls_above_limit(void)
+{
+    const double mu_r = 0.1, th = atan(2.0 * mu_r);
+    const double ref = 5.0 / 7.0 * 9.81 * (sin(th) - mu_r * cos(th));
+    for (int model = 0; model < 2; model++) {
+        double mean[2], vel[2];
+        ENSURE(slope_run(model, 2e-6, th, mu_r, 0.01, 0.05, 1e-5, mean, vel) == 0);
+        double acc = (vel[1] - vel[0]) / 0.04;
+        printf("%s: a = %.6g vs %.6g m/s^2 (%.3f %%)\n", model ? "spring" : "constant torque", acc, ref,
+               100 * (acc / ref - 1));
+        ENSURE_REL(acc, ref, 0.01);
+    }
+    return 0;
+}
+
+/* A sphere spinning about the vertical on a floor: both rolling models resist
+ * the twist with the capped torque mu_r r m g, so the spin falls linearly:
+ * omega(t) = omega0 - mu_r r m g t / I, half of omega0 at
+ * t = I omega0 / (2 mu_r r m g). (Without it a grain spinning on its one
+ * contact, as the toe of a collapsed heap leaves some, never stops.) */
+static int rolling_spring_resists_twist(void)
+{
+    const double mu_r = 0.1, om0 = 50.0;
+    for (int model = 0; model < 2; model++) {
+        dem_material m = test_material(5e7, 0.3, 0.3, 0.5);
+        m.rolling_friction = mu_r;
+        dem_world_def d = dem_world_def_default();
+        d.dt = 2e-6;
+        d.max_grains = 1;
+        d.rolling_model = model;
+        d.gravity[2] = -9.81;
+        dem_world *w = NULL;
+        cm_error err = {0};
+        ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
+        double mass = sphere_mass(m.density, R0);
+        double dstat = hertz_static_overlap(e_star_same(&m), R0, mass * 9.81);
+        double x[3] = {0, 0, R0 - dstat}, p[3] = {0, 0, 0}, n[3] = {0, 0, 1}, om[3] = {0, 0, om0};
+        ENSURE(dem_grain_add(w, x, R0, 0, NULL, &err) == 0 && dem_wall_add(w, p, n, 0, &err) == 0);
+        dem_grain_set(w, 0, NULL, NULL, om);
+        /* the wall's mu_r is the mean of the two materials' (one here) */
+        const double t_half = 0.4 * mass * R0 * R0 * om0 / (2.0 * mu_r * R0 * mass * 9.81);
+        for (long s = 0; s < lround(t_half / d.dt); s++)
+            ENSURE(dem_step(w, &err) == 0);
+        dem_grain_state g;
+        dem_grain_get(w, 0, &g);
+        printf("%s: spin %.5g rad/s at t = %.4g s (closed form %.5g)\n", model ? "spring" : "constant torque", g.w[2],
+               t_half, 0.5 * om0);
+        ENSURE_REL(g.w[2], 0.5 * om0, 0.01);
+        dem_world_destroy(&w);
+    }
+    return 0;
+}
+
 /* Tangential springs survive neighbour-list rebuilds and the re-sorting of
  * grains in memory: a chain of grains sheared against each other gives
  * bit-identical results with a rebuild + re-sort forced at every step and
@@ -428,6 +553,9 @@ static const test_case tests[] = {
     {"energy_conservation", energy_conservation},
     {"timestep_check", timestep_check},
     {"rolling_resistance", rolling_resistance},
+    {"rolling_spring_holds_on_slope", rolling_spring_holds_on_slope},
+    {"rolling_spring_rolls_above_limit", rolling_spring_rolls_above_limit},
+    {"rolling_spring_resists_twist", rolling_spring_resists_twist},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

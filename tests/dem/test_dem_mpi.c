@@ -7,6 +7,7 @@
  * slabs and pairs cross the slab boundaries (both counted and asserted).
  *
  *   mpirun -np N test_dem_mpi same_bits      (registered for N = 1, 2, 3)
+ *   mpirun -np 3 test_dem_mpi same_bits_spring
  *   mpirun -np 1 test_dem_mpi slab_bounds    (the slab split alone)
  *
  * Every rank runs the case; the verdict is agreed (any rank failing fails
@@ -22,6 +23,7 @@
 enum { N_GRAINS = 3000, STEPS = 1500 };
 
 static int g_rank, g_size;
+static int g_model = DEM_ROLLING_CONSTANT_TORQUE; /* same_bits_spring: the rolling spring */
 
 /* The world of the case: on rank 0 the grains and walls, elsewhere empty. */
 static int make_world(int with_grains, dem_world **out)
@@ -32,6 +34,7 @@ static int make_world(int with_grains, dem_world **out)
     d.dt = 4e-5;
     d.max_grains = N_GRAINS;
     d.gravity[2] = -9.81;
+    d.rolling_model = g_model;
     dem_world *w = NULL;
     cm_error err = {0};
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
@@ -155,7 +158,16 @@ static int slab_bounds(void)
     return 0;
 }
 
-static const test_case tests[] = {{"same_bits", same_bits}, {"slab_bounds", slab_bounds}};
+/* The same with the rolling spring: its rotations travel in the springs'
+ * records (migration) and come out of the same bits. */
+static int same_bits_spring(void)
+{
+    g_model = DEM_ROLLING_SPRING;
+    return same_bits();
+}
+
+static const test_case tests[] = {
+    {"same_bits", same_bits}, {"same_bits_spring", same_bits_spring}, {"slab_bounds", slab_bounds}};
 
 /* A failing rank stops all of them (the others may wait in a collective). */
 int main(int argc, char **argv)

@@ -26,6 +26,7 @@ typedef struct bed_case {
     int n, steps;
     bool stirred, surface, frozen;
     bool portable; /* the pair kernel's portable path even where the CPU has AVX2 */
+    bool spring;   /* DEM_ROLLING_SPRING instead of the constant torque */
 } bed_case;
 
 static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, double *wall_s)
@@ -39,6 +40,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     d.threads = threads;
     d.gravity[2] = -9.81;
     d.portable_kernel = c.portable;
+    d.rolling_model = c.spring ? DEM_ROLLING_SPRING : DEM_ROLLING_CONSTANT_TORQUE;
     dem_world *w = NULL;
     cm_error err = {0};
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
@@ -95,12 +97,12 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
  * fourth run its portable path; with 2 and 3 threads most pairs go through
  * the same batches, the block-crossing ones through the scalar pair_force:
  * equal hashes say all paths give the same bits. */
-static int same_bits_for_thread_counts(bool stirred, bool surface, bool frozen)
+static int same_bits_for_thread_counts(bool stirred, bool surface, bool frozen, bool spring)
 {
     uint64_t h[4];
     dem_stats st[4];
     double wall;
-    bed_case c = {.n = 400, .steps = 1500, .stirred = stirred, .surface = surface, .frozen = frozen};
+    bed_case c = {.n = 400, .steps = 1500, .stirred = stirred, .surface = surface, .frozen = frozen, .spring = spring};
     for (int t = 0; t < 3; t++)
         ENSURE(run_bed(t + 1, c, &h[t], &st[t], &wall) == 0);
     c.portable = true;
@@ -119,10 +121,27 @@ static int same_bits_for_thread_counts(bool stirred, bool surface, bool frozen)
     return 0;
 }
 
-static int same_bits_1_2_3_threads(void) { return same_bits_for_thread_counts(false, false, false); }
-static int same_bits_stirred(void) { return same_bits_for_thread_counts(true, false, false); }
-static int same_bits_with_surface(void) { return same_bits_for_thread_counts(true, true, false); }
-static int same_bits_with_frozen(void) { return same_bits_for_thread_counts(true, false, true); }
+static int same_bits_1_2_3_threads(void) { return same_bits_for_thread_counts(false, false, false, false); }
+static int same_bits_stirred(void) { return same_bits_for_thread_counts(true, false, false, false); }
+static int same_bits_with_surface(void) { return same_bits_for_thread_counts(true, true, false, false); }
+static int same_bits_with_frozen(void) { return same_bits_for_thread_counts(true, false, true, false); }
+
+/* The rolling spring (its history in the pair rows, the batch kernel's third
+ * mode, the scalar path for block-crossing pairs, the walls): the same bits
+ * for every thread count and kernel path, and not the constant torque's. */
+static int same_bits_rolling_spring(void)
+{
+    ENSURE(same_bits_for_thread_counts(true, true, false, true) == 0);
+    uint64_t h[2];
+    dem_stats st;
+    double wall;
+    for (int spring = 0; spring < 2; spring++) {
+        bed_case c = {.n = 400, .steps = 1500, .stirred = true, .surface = true, .spring = spring};
+        ENSURE(run_bed(1, c, &h[spring], &st, &wall) == 0);
+    }
+    ENSURE(h[0] != h[1]);
+    return 0;
+}
 
 /* The profile counts every step and its stages add up to no more than the
  * steps' wall time measured outside the world (each stage is a part of it). */
@@ -149,6 +168,7 @@ static const test_case tests[] = {{"same_bits_1_2_3_threads", same_bits_1_2_3_th
                                   {"same_bits_stirred", same_bits_stirred},
                                   {"same_bits_with_surface", same_bits_with_surface},
                                   {"same_bits_with_frozen", same_bits_with_frozen},
+                                  {"same_bits_rolling_spring", same_bits_rolling_spring},
                                   {"profile_covers_the_step", profile_covers_the_step}};
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -314,9 +314,12 @@ void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf,
                 m->friction, m->rolling_friction);
     }
     const dem_world_def *d = dem_world_get_def(w);
+    /* the run's step only where it settles the bed: with settle_dt the bed
+     * is the same for any run step (and its cache serves them all) */
     PUT("side=%d;seed=%llu;fill=%.17g;ke=%.17g;tmin=%.17g;tmax=%.17g;sdt=%.17g;dt=%.17g;g=%.17g,%.17g,%.17g;damp=%d",
         (int)p->side_walls, (unsigned long long)p->seed, p->fill_fraction, p->settle_ke, p->settle_min_time,
-        p->settle_max_time, p->settle_dt, d->dt, d->gravity[0], d->gravity[1], d->gravity[2], d->damping);
+        p->settle_max_time, p->settle_dt, p->settle_dt > 0.0 ? p->settle_dt : d->dt, d->gravity[0], d->gravity[1],
+        d->gravity[2], d->damping);
     if (d->rolling_model != DEM_ROLLING_CONSTANT_TORQUE) /* the default's text is unchanged: its caches stay valid */
         PUT(";roll=%d", d->rolling_model);
 #undef PUT

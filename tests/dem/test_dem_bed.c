@@ -162,9 +162,24 @@ static int bed_cache(void)
     dem_world *c = bed_world(200, 1);
     ENSURE(dem_bed_load(c, &q, path, &err) == CM_WARN_STALE); /* a warning (> 0): the caller settles again */
     ENSURE(dem_grain_count(c) == 0);
+    /* the run's step is part of the key where it settles the bed ... */
+    double g[3] = {0, 0, -9.81};
+    dem_material m = soil();
+    dem_world *d = test_world(&m, 1, 2e-5, 200, g, 1);
+    ENSURE(d && dem_bed_load(d, &p, path, &err) == CM_WARN_STALE);
+    /* ... and not with settle_dt, which settles it whatever the run's step */
+    unlink(path);
+    p.settle_dt = 4e-5;
+    dem_world *e = bed_world(200, 1), *f = test_world(&m, 1, 2e-5, 200, g, 1);
+    ENSURE(f && dem_bed_build(e, &p, NULL, NULL, &loaded, &err) == 0 && !loaded);
+    ENSURE_MSG(dem_bed_build(f, &p, NULL, NULL, &loaded, &err) == 0 && loaded, "%s", err.msg);
+    ENSURE(dem_grain_count(e) == dem_grain_count(f) && dem_grain_count(f) == 200);
     dem_world_destroy(&a);
     dem_world_destroy(&b);
     dem_world_destroy(&c);
+    dem_world_destroy(&d);
+    dem_world_destroy(&e);
+    dem_world_destroy(&f);
     unlink(path);
     return 0;
 }

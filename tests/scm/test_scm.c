@@ -487,6 +487,127 @@ static int light_nodes_stable(void)
     return 0;
 }
 
+/* ---- the exchange's interface work with light tread nodes ------------------ */
+
+/* The calibrated sand of scenes/default.cfg (bench/calibrate), K given. */
+static scm_soil calibrated_soil(double K)
+{
+    scm_soil s = scm_soil_default();
+    s.k_c = 348.6, s.k_phi = 1.392e5, s.n = 0.478;
+    s.cohesion = 4326.0, s.phi = 26.9 * M_PI / 180.0, s.K = K;
+    s.z_reg = 1e-4;
+    return s;
+}
+
+typedef struct patch_run {
+    double w_fem, w_dem;   /* J: sum f . (x+ - x), as fem_server; sum f . v h, as scm_server */
+    double gap_xy, gap_z;  /* J: w_fem - w_dem from the shear (x, y) and the normal (z) components */
+    double w_shear;        /* J: the shear forces' work seen by the FEM */
+    double vy_rms;         /* m/s: rms lateral (y) node velocity in the drag (the slide is along x) */
+    double flips;          /* share of node steps in the drag whose lateral force changed sign */
+    double slide;          /* m: the nodes' mean x displacement in the drag */
+    double fx_end;         /* N: the shear force at the end, averaged over the last 10 % of the drag */
+    double fz_end;         /* N: the normal force there */
+    double dx_max_hold;    /* m: largest node x excursion while the carrier holds still (hold phase) */
+} patch_run;
+
+/* A patch of the tire's tread: a 20 x 20 mm plate of 5 x 5 light nodes
+ * (0.15 g, the default tire's lightest), 5 mm facets on 5 mm cells as in
+ * the default scene, each node tied to a rigid carrier by a rubber spring
+ * (2e4 N/m in x, y and z: a few mm of tread). The carrier is lowered from
+ * the surface to `depth` at 0.1 m/s (the speed at which the tire's nodes
+ * enter the soil), then drawn along x by `travel` at speed U (the nodes slide
+ * at about U: a tread element in the contact patch at low slip), then, if
+ * hold > 0, held still for `hold` s. Each exchange is integrated as
+ * fem_server does it (velocity Verlet with velocities at whole steps; the
+ * forces computed at x_n, v_n act from t_n: the closing half-kick of the
+ * previous step is corrected when they arrive, fem_solver_load_changed), and
+ * the interface work is counted by both sides' rules. */
+static int slide_patch(const scm_soil *s, double depth, double U, double travel, double hold, patch_run *out)
+{
+    const double h0 = 0.05, dt = 1e-5, mass = 1.5e-4, kr = 2e4, v_down = 0.1;
+    scm_grid_def g = {.min = {0, 0}, .max = {0.08, 0.04}, .cell = 0.005, .height = h0};
+    scm_terrain *t;
+    mesh m;
+    ENSURE(scm_terrain_create(&g, s, &t, NULL) == 0);
+    /* edges between cell centres: 4 x 4 cells under the plate */
+    ENSURE(plate_mesh(&m, 0.011, 0.011, 0.02, 0.02, h0, 4, 4) == 0);
+    ENSURE(scm_terrain_set_surface(t, m.nn, m.x, m.nt, m.tris, NULL) == 0);
+    const int nn = m.nn;
+    double *a = calloc(3 * (size_t)nn, sizeof(double)), *fp = calloc(3 * (size_t)nn, sizeof(double));
+    ENSURE(a && fp);
+    const long n_down = (long)(depth / v_down / dt + 0.5), n_drag = (long)(travel / U / dt + 0.5),
+               n_hold = (long)(hold / dt + 0.5), n_all = n_down + n_drag + n_hold;
+    memset(out, 0, sizeof *out);
+    long n_flip = 0, n_node_steps = 0, n_end = 0;
+    double carrier[2] = {0, 0}; /* x offset, z offset of the carrier (the nodes' rest positions) */
+    for (long n = 0; n < n_all; n++) {
+        ENSURE(scm_terrain_step(t, m.x, m.v, dt, NULL) == 0);
+        const double *f = scm_terrain_node_forces(t);
+        /* the carrier at t_{n+1} */
+        if (n < n_down)
+            carrier[1] = -v_down * dt * (double)(n + 1);
+        else if (n < n_down + n_drag)
+            carrier[0] = U * dt * (double)(n + 1 - n_down);
+        const int drag = n >= n_down && n < n_down + n_drag;
+        for (int k = 0; k < nn; k++) {
+            double *x = m.x + 3 * k, *v = m.v + 3 * k, *ak = a + 3 * k, *fk = fp + 3 * k;
+            const double *x0 = m.x0 + 3 * k, *fn = f + 3 * k;
+            double xold[3], wd[3];
+            for (int c = 0; c < 3; c++) {
+                wd[c] = fn[c] * v[c] * dt; /* scm_server's count, with the velocity it received */
+                out->w_dem += wd[c];
+                /* the force at t_n replaces the one the last half-kick closed with */
+                const double da = (fn[c] - fk[c]) / mass;
+                if (c == 1 && drag)
+                    n_flip += fn[c] * fk[c] < 0;
+                ak[c] += da;
+                v[c] += 0.5 * dt * da;
+                fk[c] = fn[c];
+                xold[c] = x[c];
+                v[c] += 0.5 * dt * ak[c];
+                x[c] += dt * v[c];
+            }
+            const double rest[3] = {x0[0] + carrier[0], x0[1], x0[2] + carrier[1]};
+            for (int c = 0; c < 3; c++) {
+                ak[c] = (fn[c] - kr * (x[c] - rest[c])) / mass;
+                v[c] += 0.5 * dt * ak[c];
+                const double dw = fn[c] * (x[c] - xold[c]);
+                out->w_fem += dw;
+                if (c < 2)
+                    out->w_shear += dw, out->gap_xy += dw - wd[c];
+                else
+                    out->gap_z += dw - wd[c];
+            }
+            ENSURE(isfinite(x[0]) && isfinite(x[2]));
+            if (drag) {
+                n_node_steps++;
+                out->vy_rms += v[1] * v[1];
+            }
+            if (n >= n_down + n_drag)
+                out->dx_max_hold = fmax(out->dx_max_hold, fabs(x[0] - (x0[0] + carrier[0])));
+        }
+        if (drag && n >= n_down + n_drag - n_drag / 10) {
+            scm_totals tot;
+            scm_terrain_totals(t, &tot);
+            out->fx_end += tot.force[0], out->fz_end += tot.force[2], n_end++;
+        }
+    }
+    double sx = 0;
+    for (int k = 0; k < nn; k++)
+        sx += m.x[3 * k] - m.x0[3 * k];
+    out->slide = sx / nn;
+    out->flips = n_node_steps ? (double)n_flip / (double)n_node_steps : 0;
+    out->vy_rms = n_node_steps ? sqrt(out->vy_rms / (double)n_node_steps) : 0;
+    if (n_end)
+        out->fx_end /= (double)n_end, out->fz_end /= (double)n_end;
+    free(a);
+    free(fp);
+    mesh_free(&m);
+    scm_terrain_destroy(&t);
+    return 0;
+}
+
 static int scene_sections(void)
 {
     static const char *const scm_own[] = {"run", "coupling", "scm", NULL};
@@ -562,6 +683,28 @@ static int scene_sections(void)
     return 0;
 }
 
+/* Measurement (step 1 of issue 19's regularisation): the tread patch slid
+ * 5 mm at 1 cm/s at 15 mm depth for K from 2.5 cm to 0.2 mm; the gap of
+ * the two sides' interface work split into its shear and normal parts, and
+ * the nodes' lateral chatter: rms lateral velocity (the slide is along x at
+ * 1 cm/s) and the share of node steps whose lateral force changed sign. */
+static int measure_patch_work(void)
+{
+    const double Ks[] = {0.025, 0.01, 0.0025, 7.74e-4, 2e-4};
+    printf("  %-7s %10s %10s %8s %10s %10s %10s %9s %7s %8s\n", "K [mm]", "W_fem [J]", "W_dem [J]", "gap [%]",
+           "gap_xy [J]", "gap_z [J]", "W_xy [J]", "vy [m/s]", "flips", "Fx [N]");
+    for (int i = 0; i < 5; i++) {
+        const scm_soil s = calibrated_soil(Ks[i]);
+        patch_run r;
+        if (slide_patch(&s, 0.015, 0.01, 0.005, 0.0, &r))
+            return 1;
+        printf("  %-7.3g %10.4g %10.4g %8.3f %10.3g %10.3g %10.3g %9.3g %7.3f %8.4g\n", 1e3 * Ks[i], r.w_fem,
+               r.w_dem, 100 * (r.w_fem - r.w_dem) / fabs(r.w_fem), r.gap_xy, r.gap_z, r.w_shear, r.vy_rms, r.flips,
+               r.fx_end);
+    }
+    return 0;
+}
+
 static const test_case tests[] = {
     {"plate_pressure_sinkage", plate_pressure_sinkage},
     {"rut_memory", rut_memory},
@@ -572,4 +715,11 @@ static const test_case tests[] = {
     {"scene_sections", scene_sections},
 };
 
-int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }
+static const test_case measurements[] = {
+    {"measure_patch_work", measure_patch_work},
+};
+
+int main(int argc, char **argv)
+{
+    return test_main_measure(argc, argv, tests, TEST_COUNT(tests), measurements, TEST_COUNT(measurements));
+}

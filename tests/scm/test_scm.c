@@ -5,8 +5,9 @@
  *   rut_memory               unloading springs back by p_max / k_u only, reloading follows the
  *                            elastic line, a second loading to the same force sinks by the
  *                            elastic part only
- *   shear_plate_janosi       a plate sliding at constant depth: j = u t on every node and
- *                            tau = (c + p tan phi)(1 - e^{-j/K}) over the whole plate
+ *   shear_plate_janosi       a plate sliding at constant depth: j = u t on every node, its
+ *                            elastic part K (1 - e^{-j/K}), and tau = (c + p tan phi)
+ *                            (1 - e^{-j/K}) over the whole plate
  *   wheel_wong_reece         a rigid wheel at 10 % and 30 % slip in steady state against the
  *                            Bekker–Wong rigid-wheel integrals by quadrature (2 %)
  *   node_force_balance       nodal forces have the cells' resultant and moment to round-off
@@ -269,8 +270,15 @@ static int shear_plate_janosi(void)
             m.v[3 * k] = u;
         const double j = u * n * dt;
         ENSURE(scm_terrain_step(t, m.x, NULL) == 0);
-        for (int k = 0; k < m.nn; k++) /* the shear displacement up to x: the slide since the first step */
+        for (int k = 0; k < m.nn; k++) { /* the shear displacement up to x: the slide since the first step */
             ENSURE_NEAR(scm_terrain_node_shear(t, k), j, 1e-12);
+            /* its elastic part on the Janosi limit, K (1 - e^{-j/K}), along the slide */
+            double e[3];
+            scm_terrain_node_shear_elastic(t, k, e);
+            ENSURE_NEAR(e[0], s.K * (1 - exp(-j / s.K)), 1e-12);
+            ENSURE_NEAR(e[1], 0, 1e-15);
+            ENSURE_NEAR(e[2], 0, 1e-15);
+        }
         scm_totals tot;
         scm_terrain_totals(t, &tot);
         const double area = tot.contacts * g.cell * g.cell;

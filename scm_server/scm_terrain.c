@@ -2,15 +2,18 @@
  *   raster  every downward-facing triangle onto the cell centres below it,
  *           keeping per cell the lowest surface point (its triangle and
  *           barycentric weights): the vertical ray from the cell hits there
+ *   slide   each node in contact advances its shear displacement by its
+ *           tangential motion since the last step (the elastic part e by
+ *           the vector, held within the Janosi strength; the rest is
+ *           plastic slip)
  *   soil    per cell hit below its current surface: pressure from the
  *           loading history (Bekker / elastic line), shear from the tread's
- *           shear displacement (its elastic part, bounded by the Janosi
- *           curve), the force on the contact point distributed to the
- *           triangle's nodes (paper eq. 42); the rut is committed
- *   shear   each node in contact advances its shear displacement by its
- *           tangential motion v_t dt (j by its length, the elastic part e
- *           by the vector, then held within the Janosi strength); a node out
- *           of contact starts again
+ *           elastic shear displacement (bounded by the Janosi curve), the
+ *           force on the contact point distributed to the triangle's nodes
+ *           (paper eq. 42); the rut is committed
+ *   contact which nodes are below the soil now; a node out of contact
+ *           starts its shear displacement again
+ * (slide and contact are timed together as "shear").
  * Cells are stored structure-of-arrays; nothing is allocated per step. */
 #include <math.h>
 #include <stdlib.h>
@@ -152,7 +155,8 @@ int scm_terrain_set_surface(scm_terrain *t, int n_nodes, const double *x, int n_
     t->nrm = calloc(3 * (size_t)n_nodes, sizeof *t->nrm);
     t->tri_n = calloc(3 * (size_t)n_tris, sizeof *t->tri_n);
     t->in_contact = calloc((size_t)n_nodes, 1);
-    if (!t->tris || !t->f || !t->jp || !t->e || !t->x_prev || !t->node_area || !t->node_p || !t->node_pmax || !t->nrm || !t->tri_n || !t->in_contact) {
+    if (!t->tris || !t->f || !t->jp || !t->e || !t->x_prev || !t->node_area || !t->node_p || !t->node_pmax ||
+        !t->nrm || !t->tri_n || !t->in_contact) {
         free_surface(t);
         return cm_fail(err, CM_ERR_NOMEM, "out of memory for a surface of %d nodes", n_nodes);
     }

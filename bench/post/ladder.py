@@ -41,14 +41,14 @@ def main():
     if len(args) >= 2 and args[0] == "--title":
         title, args = args[1], args[2:]
     series = {}
-    styles = {}
+    label_style, styles = {}, {}
     for arg in args:
         label, path = arg.split("=", 1)
-        styles.setdefault(label, ["--", "-", ":", "-."][len(styles) % 4])
+        label_style.setdefault(label, ["--", "-", ":", "-."][len(label_style) % 4])
         for r in read(path):
             key = "%s, %s tire" % (label, r.get("tire", "elastic"))
             series.setdefault(key, []).append(r)
-            styles[key] = styles[label]
+            styles[key] = label_style[label]
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharex=True)
     panels = [("T_P_mean_N", "T_P_ci95_N", "drawbar pull T_P [N]", 1.0),
               ("T_H_mean_N", "T_H_ci95_N", "gross traction T_H [N]", 1.0),

@@ -7,9 +7,14 @@
  *   unloading/reload.  p = p_max - k_u (z_max - z)        (Wong: elastic line)
  *   shear              tau = (c + p tan phi)(1 - e^{-j/K}) (Janosi–Hanamoto)
  * with j the shear displacement accumulated by the tread element in contact
- * (the soil it carries) since it entered the contact. The normal stress acts
- * along the tire surface's normal, the shear stress against the surface's
- * sliding velocity, both per unit of tire surface area; each cell's force is
+ * (the soil it carries) since it entered the contact. The shear stress is
+ * an elastic-plastic spring on that curve: it acts against the elastic part
+ * e of the tread's tangential displacement with the curve's initial slope,
+ * tau = (c + p_max tan phi)/K |e|, and e is held where that reaches the
+ * curve (so that monotonic sliding gives Janosi's tau exactly, and stopping
+ * or turning does not make it chatter). The
+ * normal stress acts along the tire surface's normal, both per unit of tire
+ * surface area; each cell's force is
  * put on the three nodes of the triangle it touches with the contact point's
  * barycentric weights (paper eq. 42), so the nodal forces have the cells'
  * resultant and moment to round-off.
@@ -17,9 +22,10 @@
  * Usage:
  *   scm_terrain_create(&grid, &soil, &t, &err);
  *   scm_terrain_set_surface(t, n_nodes, x0, n_tris, tris, &err);   once
- *   loop: scm_terrain_step(t, x, v, dt, &err);   forces for the surface at x,
- *         scm_terrain_node_forces(t), scm_terrain_totals(t, &tot);
- *         (then the tread's shear displacement advances over dt with v)
+ *   loop: scm_terrain_step(t, x, &err);   forces for the surface at x
+ *         (the tread's shear displacement first advanced by its motion
+ *         since the last step), scm_terrain_node_forces(t),
+ *         scm_terrain_totals(t, &tot);
  *   scm_terrain_destroy(&t);
  * Units: SI (m, N, Pa, s). */
 #ifndef SCM_H
@@ -52,6 +58,12 @@ scm_soil scm_soil_default(void);
 double scm_bekker(const scm_soil *s, double b, double z);       /* Pa, first loading at sinkage z (m) */
 double scm_unload_stiffness(const scm_soil *s, double z_max);   /* Pa/m */
 double scm_janosi(const scm_soil *s, double p, double j);       /* Pa, shear stress at pressure p, displacement j */
+/* The shear as an elastic-plastic spring on the Janosi curve (scm_soil.c):
+ * tau = scm_shear_stiffness(p_max) |e| (Pa/m; p_max the pressure of the
+ * soil's first loading, Pa), the elastic displacement |e| at most
+ * scm_shear_elastic_limit(p, p_max, j) (m) at pressure p after a slide j. */
+double scm_shear_stiffness(const scm_soil *s, double p_max);
+double scm_shear_elastic_limit(const scm_soil *s, double p, double p_max, double j);
 
 typedef struct scm_grid_def {
     double min[2], max[2]; /* m, horizontal extent (x, y) of the soil */
@@ -91,11 +103,12 @@ int scm_terrain_set_surface(scm_terrain *t, int n_nodes, const double *x, int n_
 /* Bekker's b in use, m. */
 double scm_terrain_plate_width(const scm_terrain *t);
 
-/* One exchange: node forces (N) for the surface at positions x (3 n, m) with
- * velocities v (3 n, m/s), committing the soil's state (ruts) at x, then the
- * tread's shear displacement advances by |v_t| dt. Fails when a contact is
- * outside the grid (naming scm.grid). */
-int scm_terrain_step(scm_terrain *t, const double *x, const double *v, double dt, cm_error *err);
+/* One exchange: the tread's shear displacement advances by the surface's
+ * tangential motion since the last step (positions, not velocities: the
+ * forces are a function of x, README.md), then the node forces (N) for the
+ * surface at positions x (3 n, m), committing the soil's state (ruts) at x.
+ * Fails when a contact is outside the grid (naming scm.grid). */
+int scm_terrain_step(scm_terrain *t, const double *x, cm_error *err);
 const double *scm_terrain_node_forces(const scm_terrain *t);
 void scm_terrain_totals(const scm_terrain *t, scm_totals *out);
 scm_profile scm_terrain_profile(const scm_terrain *t);
@@ -109,7 +122,9 @@ double scm_terrain_cell_height(const scm_terrain *t, int i, int j);
 /* The deepest sinkage the cell was loaded to (m), and its pressure now (Pa). */
 double scm_terrain_cell_zmax(const scm_terrain *t, int i, int j);
 double scm_terrain_cell_pressure(const scm_terrain *t, int i, int j);
-/* The shear displacement the surface node carries (m). */
+/* The shear displacement the surface node carries (m), and the elastic
+ * part of it (3 components, world frame, m; zeros for a bad index). */
 double scm_terrain_node_shear(const scm_terrain *t, int node);
+void scm_terrain_node_shear_elastic(const scm_terrain *t, int node, double e[3]);
 
 #endif

@@ -151,7 +151,7 @@ static int run(const options *o)
     memset(&tot, 0, sizeof tot);
     for (;; n++) {
         const int finish = stop_requested || time >= rcfg.end_time - 0.5 * rcfg.dt;
-        if (!finish && (rc = scm_terrain_step(t, x, v, interval, &err)))
+        if (!finish && (rc = scm_terrain_step(t, x, &err)))
             goto fail;
         double t0 = cm_now();
         ipc_frame_head *out;

@@ -49,3 +49,32 @@ double scm_janosi(const scm_soil *s, double p, double j)
 {
     return (s->cohesion + p * tan(s->phi)) * (1.0 - exp(-fabs(j) / s->K));
 }
+
+/* The shear stress as an elastic-plastic spring on the Janosi curve. The
+ * stress is a stiffness times the elastic part e of the shear displacement,
+ *   tau = k_tau |e|,  k_tau = (c + p_max tan phi) / K,
+ * the Janosi curve's initial slope for soil first loaded to p_max (the
+ * cell's deepest loading: p itself on first loading, fixed while the cell
+ * unloads and reloads on its elastic line), and e is held within the
+ * Janosi strength at the pressure now,
+ *   k_tau |e| <= (c + p tan phi)(1 - e^{-j/K}),
+ * the rest of the displacement j being plastic slip. In monotonic sliding
+ * from rest on first loading e stays on that limit (j > K (1 - e^{-j/K}) for
+ * every j > 0), so tau is Janosi's to round-off; when the sliding stops or
+ * turns, tau follows the displacement elastically instead of jumping to the
+ * full strength in the direction of the instantaneous velocity, which an
+ * explicit exchange with light surface nodes turned into chatter. The
+ * stiffness does not follow the pressure now: a stiffness k_tau(p) made the
+ * shear force a function of the sinkage in the elastic range (a force
+ * tangential to the surface growing with the normal displacement and none
+ * the other way: a circulatory stiffness) and the tread's normal and
+ * tangential oscillations fed each other; a falling pressure lowers the
+ * limit instead, which only removes elastic energy (README.md, "The shear:
+ * an elastic-plastic spring on the Janosi curve"). */
+double scm_shear_stiffness(const scm_soil *s, double p_max) { return (s->cohesion + p_max * tan(s->phi)) / s->K; }
+
+double scm_shear_elastic_limit(const scm_soil *s, double p, double p_max, double j)
+{
+    const double k = scm_shear_stiffness(s, p_max);
+    return k > 0 ? scm_janosi(s, p, j) / k : 0.0;
+}

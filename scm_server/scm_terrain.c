@@ -2,12 +2,18 @@
  *   raster  every downward-facing triangle onto the cell centres below it,
  *           keeping per cell the lowest surface point (its triangle and
  *           barycentric weights): the vertical ray from the cell hits there
+ *   slide   each node in contact advances its shear displacement by its
+ *           tangential motion since the last step (the elastic part e by
+ *           the vector, held within the Janosi strength; the rest is
+ *           plastic slip)
  *   soil    per cell hit below its current surface: pressure from the
  *           loading history (Bekker / elastic line), shear from the tread's
- *           shear displacement, the force on the contact point distributed
- *           to the triangle's nodes (paper eq. 42); the rut is committed
- *   shear   each node in contact advances its shear displacement by its
- *           tangential speed times dt; a node out of contact starts again
+ *           elastic shear displacement (bounded by the Janosi curve), the
+ *           force on the contact point distributed to the triangle's nodes
+ *           (paper eq. 42); the rut is committed
+ *   contact which nodes are below the soil now; a node out of contact
+ *           starts its shear displacement again
+ * (slide and contact are timed together as "shear").
  * Cells are stored structure-of-arrays; nothing is allocated per step. */
 #include <math.h>
 #include <stdlib.h>
@@ -41,7 +47,14 @@ struct scm_terrain {
     int nn, nt;
     int *tris;
     double *f;       /* 3 nn, N */
-    double *j;       /* nn, m: tread shear displacement */
+    /* the tread's shear displacement, Janosi's j = jp + |e|: */
+    double *jp;      /* nn, m: its plastic part, the slip beyond the shear spring's reach */
+    double *e;       /* 3 nn, m: its elastic part, a vector in the node's tangent plane (world frame) */
+    double *x_prev;  /* 3 nn, m: the positions of the last step */
+    /* per node, the soil under it at the last step (for the limit of e):
+     * sums over the cells acting on its triangles of w area, w area p and
+     * w area p_max (w the node's barycentric weight) */
+    double *node_area, *node_p, *node_pmax;
     double *nrm;     /* 3 nn: node normals (area-weighted) */
     double *tri_n;   /* 3 nt: unit outward normals this step */
     unsigned char *in_contact; /* nn */
@@ -88,11 +101,17 @@ static void free_surface(scm_terrain *t)
 {
     free(t->tris);
     free(t->f);
-    free(t->j);
+    free(t->jp);
+    free(t->e);
+    free(t->x_prev);
+    free(t->node_area);
+    free(t->node_p);
+    free(t->node_pmax);
     free(t->nrm);
     free(t->tri_n);
     free(t->in_contact);
-    t->tris = NULL, t->f = t->j = t->nrm = t->tri_n = NULL, t->in_contact = NULL;
+    t->tris = NULL, t->f = t->jp = t->e = t->x_prev = t->nrm = t->tri_n = NULL;
+    t->node_area = t->node_p = t->node_pmax = NULL, t->in_contact = NULL;
 }
 
 void scm_terrain_destroy(scm_terrain **tp)
@@ -127,15 +146,22 @@ int scm_terrain_set_surface(scm_terrain *t, int n_nodes, const double *x, int n_
     t->nt = n_tris;
     t->tris = malloc(3 * (size_t)n_tris * sizeof *t->tris);
     t->f = calloc(3 * (size_t)n_nodes, sizeof *t->f);
-    t->j = calloc((size_t)n_nodes, sizeof *t->j);
+    t->jp = calloc((size_t)n_nodes, sizeof *t->jp);
+    t->e = calloc(3 * (size_t)n_nodes, sizeof *t->e);
+    t->x_prev = malloc(3 * (size_t)n_nodes * sizeof *t->x_prev);
+    t->node_area = calloc((size_t)n_nodes, sizeof *t->node_area);
+    t->node_p = calloc((size_t)n_nodes, sizeof *t->node_p);
+    t->node_pmax = calloc((size_t)n_nodes, sizeof *t->node_pmax);
     t->nrm = calloc(3 * (size_t)n_nodes, sizeof *t->nrm);
     t->tri_n = calloc(3 * (size_t)n_tris, sizeof *t->tri_n);
     t->in_contact = calloc((size_t)n_nodes, 1);
-    if (!t->tris || !t->f || !t->j || !t->nrm || !t->tri_n || !t->in_contact) {
+    if (!t->tris || !t->f || !t->jp || !t->e || !t->x_prev || !t->node_area || !t->node_p || !t->node_pmax ||
+        !t->nrm || !t->tri_n || !t->in_contact) {
         free_surface(t);
         return cm_fail(err, CM_ERR_NOMEM, "out of memory for a surface of %d nodes", n_nodes);
     }
     memcpy(t->tris, tris, 3 * (size_t)n_tris * sizeof *tris);
+    memcpy(t->x_prev, x, 3 * (size_t)n_nodes * sizeof *x);
     /* Bekker's b: given, or the smaller horizontal dimension of the surface
      * (a plate's width; a tire's width, as Wong takes it for a wheel). */
     double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
@@ -216,12 +242,14 @@ static int raster(scm_terrain *t, const double *x, cm_error *err)
 }
 
 /* Stage soil: pressure and shear per cell hit, forces onto the nodes. */
-static void soil(scm_terrain *t, const double *x, const double *v)
+static void soil(scm_terrain *t, const double *x)
 {
     const scm_soil *s = &t->s;
     const double h0 = t->g.height, area_h = t->g.cell * t->g.cell;
     memset(t->f, 0, 3 * (size_t)t->nn * sizeof *t->f);
-    memset(t->in_contact, 0, (size_t)t->nn);
+    memset(t->node_area, 0, (size_t)t->nn * sizeof *t->node_area);
+    memset(t->node_p, 0, (size_t)t->nn * sizeof *t->node_p);
+    memset(t->node_pmax, 0, (size_t)t->nn * sizeof *t->node_pmax);
     for (int q = 0; q < t->n_pressed; q++)
         t->press[t->pressed[q]] = 0;
     t->n_pressed = 0;
@@ -257,37 +285,48 @@ static void soil(scm_terrain *t, const double *x, const double *v)
          * the default tire) while the vertical-sinkage law says nothing of
          * the lateral pressure on a flank anyway. */
         const double area = area_h / fmax(fabs(nh[2]), SCM_MIN_NZ);
-        double P[3], vp[3], jp = 0;
+        double P[3], ep[3], jc = 0; /* the contact point, its e and its j */
         for (int a = 0; a < 3; a++) {
             P[a] = w[0] * x[3 * tr[0] + a] + w[1] * x[3 * tr[1] + a] + w[2] * x[3 * tr[2] + a];
-            vp[a] = w[0] * v[3 * tr[0] + a] + w[1] * v[3 * tr[1] + a] + w[2] * v[3 * tr[2] + a];
+            ep[a] = w[0] * t->e[3 * tr[0] + a] + w[1] * t->e[3 * tr[1] + a] + w[2] * t->e[3 * tr[2] + a];
         }
-        for (int k = 0; k < 3; k++)
-            jp += w[k] * t->j[tr[k]];
-        const double vn = vp[0] * nh[0] + vp[1] * nh[1] + vp[2] * nh[2];
-        double vt[3] = {vp[0] - vn * nh[0], vp[1] - vn * nh[1], vp[2] - vn * nh[2]};
-        const double vtl = sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2]);
-        /* normal stress pushes the surface back along -n; shear opposes its sliding */
+        for (int k = 0; k < 3; k++) {
+            const double *ek = t->e + 3 * tr[k];
+            jc += w[k] * (t->jp[tr[k]] + sqrt(ek[0] * ek[0] + ek[1] * ek[1] + ek[2] * ek[2]));
+        }
+        /* the elastic shear displacement at the contact point, in the face's plane */
+        const double en = ep[0] * nh[0] + ep[1] * nh[1] + ep[2] * nh[2];
+        double et[3] = {ep[0] - en * nh[0], ep[1] - en * nh[1], ep[2] - en * nh[2]};
+        const double etl = sqrt(et[0] * et[0] + et[1] * et[1] + et[2] * et[2]);
+        /* normal stress pushes the surface back along -n; the shear stress
+         * acts against the elastic shear displacement, k_tau(p_max) |e|, at
+         * most Janosi's (c + p tan phi)(1 - e^{-j/K}) (scm_soil.c; the nodes'
+         * limits on e keep it there but for the interpolation between them) */
         const double fn = p * area;
-        const double ft = vtl > 1e-12 ? scm_janosi(s, p, jp) * area / vtl : 0.0;
+        const double tau = fmin(scm_shear_stiffness(s, t->pmax[c]) * etl, scm_janosi(s, p, jc));
+        const double ft = etl > 0 ? tau * area / etl : 0.0;
         double F[3];
         for (int a = 0; a < 3; a++)
-            F[a] = -fn * nh[a] - ft * vt[a];
+            F[a] = -fn * nh[a] - ft * et[a];
         for (int k = 0; k < 3; k++) {
-            double *fk = t->f + 3 * tr[k];
+            const int nk = tr[k];
+            double *fk = t->f + 3 * nk;
             for (int a = 0; a < 3; a++)
                 fk[a] += w[k] * F[a]; /* paper eq. 42: barycentric weights of the contact point */
+            t->node_area[nk] += w[k] * area; /* the soil under the node, for its limit on e */
+            t->node_p[nk] += w[k] * area * p;
+            t->node_pmax[nk] += w[k] * area * t->pmax[c];
         }
         for (int a = 0; a < 3; a++) {
             tot->force[a] += F[a];
             tot->normal_force[a] -= fn * nh[a];
-            tot->shear_force[a] -= ft * vt[a];
+            tot->shear_force[a] -= ft * et[a];
         }
         tot->moment[0] += P[1] * F[2] - P[2] * F[1];
         tot->moment[1] += P[2] * F[0] - P[0] * F[2];
         tot->moment[2] += P[0] * F[1] - P[1] * F[0];
         /* gross traction and resistance: the normal and the shear parts apart */
-        const double fx_n = -fn * nh[0], fx_t = -ft * vt[0];
+        const double fx_n = -fn * nh[0], fx_t = -ft * et[0];
         tot->traction_pos += (fx_n > 0 ? fx_n : 0) + (fx_t > 0 ? fx_t : 0);
         tot->traction_neg += (fx_n < 0 ? fx_n : 0) + (fx_t < 0 ? fx_t : 0);
         tot->contacts++;
@@ -305,36 +344,24 @@ static double rest_height(const scm_terrain *t, size_t c)
     return t->g.height - (rest > 0 ? rest : 0.0);
 }
 
-/* Stage shear: a node is in contact when it is below the soil surface of its
- * cell (the ruts just committed); the shear displacement carried by each
- * node in contact grows by its sliding over the soil, |v_t| dt (Wong: j is
- * the slip velocity integrated from the entry into the contact), and starts
- * again from 0 when the node leaves the soil. */
-static void shear(scm_terrain *t, const double *x, const double *v, double dt)
+/* Stage slide: the tread's shear displacement from the nodes' motion since
+ * the last exchange, dx = x - x_prev, its part in the node's tangent plane
+ * dx_t (the node normal: the mean of its faces' normals now), for each node
+ * in contact at the last exchange. The elastic part e is turned into
+ * today's tangent plane as the tread rotates (its length kept) and moves by
+ * dx_t; what passes the point where the shear spring meets the Janosi curve
+ * at the node's pressure (scm_soil.c) is plastic slip, added to jp. Janosi's
+ * j = jp + |e| is then the slip integrated from the entry into the contact
+ * in monotonic sliding (Wong's j: the slide, exactly, since the limit is
+ * evaluated at the j of the slide so far), and does not grow while the
+ * tread vibrates within the elastic range (a j summing |dx_t| grew with
+ * every oscillation and raised the stress: +7 % on test_scm's patch).
+ * From positions, not velocities: the shear stress is then a function of
+ * the positions just received, as the normal stress is (e from the
+ * velocities is e at x_n - v dt/2, a stress half an exchange late: a
+ * negative damper that pumped energy into the light nodes). */
+static void slide(scm_terrain *t, const double *x)
 {
-    const scm_grid_def *g = &t->g;
-    const double inv = 1.0 / g->cell;
-    for (int k = 0; k < t->nn; k++) {
-        const double *p = x + 3 * k;
-        t->in_contact[k] = 0;
-        if (!(p[2] < g->height))
-            continue;
-        /* the surface bilinear between the cell centres: on a convex tread
-         * (the wheel's bottom) it lies above the nodes of the loaded tread */
-        const double fi = (p[0] - g->min[0]) * inv - 0.5, fj = (p[1] - g->min[1]) * inv - 0.5;
-        if (!(fi > -1 && fj > -1 && fi < t->nx && fj < t->ny))
-            continue;
-        const int i0 = (int)floor(fi), j0 = (int)floor(fj);
-        const double tx = fi - i0, ty = fj - j0;
-        const int ia = i0 < 0 ? 0 : i0, ib = i0 + 1 >= t->nx ? t->nx - 1 : i0 + 1;
-        const int ja = j0 < 0 ? 0 : j0, jb = j0 + 1 >= t->ny ? t->ny - 1 : j0 + 1;
-        const size_t nx = (size_t)t->nx;
-        const double h = (1 - ty) * ((1 - tx) * rest_height(t, (size_t)ja * nx + (size_t)ia) +
-                                     tx * rest_height(t, (size_t)ja * nx + (size_t)ib)) +
-                         ty * ((1 - tx) * rest_height(t, (size_t)jb * nx + (size_t)ia) +
-                               tx * rest_height(t, (size_t)jb * nx + (size_t)ib));
-        t->in_contact[k] = p[2] < h;
-    }
     memset(t->nrm, 0, 3 * (size_t)t->nn * sizeof *t->nrm);
     for (int e = 0; e < t->nt; e++) {
         const int *tr = t->tris + 3 * e;
@@ -345,19 +372,72 @@ static void shear(scm_terrain *t, const double *x, const double *v, double dt)
                 t->nrm[3 * tr[k] + a] += t->tri_n[3 * e + a];
     }
     for (int k = 0; k < t->nn; k++) {
-        if (!t->in_contact[k]) {
-            t->j[k] = 0;
+        double *ek = t->e + 3 * k, *xp = t->x_prev + 3 * k;
+        const double *xk = x + 3 * k;
+        const double d[3] = {xk[0] - xp[0], xk[1] - xp[1], xk[2] - xp[2]};
+        xp[0] = xk[0], xp[1] = xk[1], xp[2] = xk[2];
+        if (!t->in_contact[k])
             continue;
+        const double *n = t->nrm + 3 * k;
+        const double nl = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        const double u[3] = {nl > 0 ? n[0] / nl : 0, nl > 0 ? n[1] / nl : 0, nl > 0 ? n[2] / nl : 0};
+        const double dn = d[0] * u[0] + d[1] * u[1] + d[2] * u[2];
+        const double dtan[3] = {d[0] - dn * u[0], d[1] - dn * u[1], d[2] - dn * u[2]};
+        /* e into today's tangent plane, its length kept, then moved by dx_t */
+        const double e2 = ek[0] * ek[0] + ek[1] * ek[1] + ek[2] * ek[2];
+        const double en = ek[0] * u[0] + ek[1] * u[1] + ek[2] * u[2];
+        const double p2 = e2 - en * en;
+        const double keep = p2 > 0 ? sqrt(e2 / p2) : 0.0;
+        for (int a = 0; a < 3; a++)
+            ek[a] = (ek[a] - en * u[a]) * keep + dtan[a];
+        /* plastic slip beyond the Janosi strength at the node's pressure (that
+         * of the cells on its faces at the last step; none yet: first
+         * loading), at the j this motion reaches */
+        const double el = sqrt(ek[0] * ek[0] + ek[1] * ek[1] + ek[2] * ek[2]);
+        const double na = t->node_area[k], j = t->jp[k] + el;
+        const double lim = na > 0 ? scm_shear_elastic_limit(&t->s, t->node_p[k] / na, t->node_pmax[k] / na, j)
+                                  : t->s.K * (1.0 - exp(-j / t->s.K)); /* p = p_max */
+        if (el > lim) {
+            t->jp[k] += el - lim;
+            for (int a = 0; a < 3; a++)
+                ek[a] *= lim / el;
         }
-        const double *n = t->nrm + 3 * k, *vk = v + 3 * k;
-        double nl = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-        double vn = nl > 0 ? (vk[0] * n[0] + vk[1] * n[1] + vk[2] * n[2]) / nl : 0;
-        double vt2 = vk[0] * vk[0] + vk[1] * vk[1] + vk[2] * vk[2] - vn * vn;
-        t->j[k] += sqrt(vt2 > 0 ? vt2 : 0) * dt;
     }
 }
 
-int scm_terrain_step(scm_terrain *t, const double *x, const double *v, double dt, cm_error *err)
+/* Stage contact: a node is in contact when it is below the soil surface at
+ * its position (the ruts just committed, bilinear between the cell centres:
+ * on a convex tread, the wheel's bottom, it lies above the loaded nodes); a
+ * node out of the soil starts its shear displacement again from 0. */
+static void contact(scm_terrain *t, const double *x)
+{
+    const scm_grid_def *g = &t->g;
+    const double inv = 1.0 / g->cell;
+    for (int k = 0; k < t->nn; k++) {
+        const double *p = x + 3 * k;
+        int in = 0;
+        const double fi = (p[0] - g->min[0]) * inv - 0.5, fj = (p[1] - g->min[1]) * inv - 0.5;
+        if (p[2] < g->height && fi > -1 && fj > -1 && fi < t->nx && fj < t->ny) {
+            const int i0 = (int)floor(fi), j0 = (int)floor(fj);
+            const double tx = fi - i0, ty = fj - j0;
+            const int ia = i0 < 0 ? 0 : i0, ib = i0 + 1 >= t->nx ? t->nx - 1 : i0 + 1;
+            const int ja = j0 < 0 ? 0 : j0, jb = j0 + 1 >= t->ny ? t->ny - 1 : j0 + 1;
+            const size_t nx = (size_t)t->nx;
+            const double h = (1 - ty) * ((1 - tx) * rest_height(t, (size_t)ja * nx + (size_t)ia) +
+                                         tx * rest_height(t, (size_t)ja * nx + (size_t)ib)) +
+                             ty * ((1 - tx) * rest_height(t, (size_t)jb * nx + (size_t)ia) +
+                                   tx * rest_height(t, (size_t)jb * nx + (size_t)ib));
+            in = p[2] < h;
+        }
+        t->in_contact[k] = (unsigned char)in;
+        if (!in) {
+            t->jp[k] = 0;
+            t->e[3 * k] = t->e[3 * k + 1] = t->e[3 * k + 2] = 0;
+        }
+    }
+}
+
+int scm_terrain_step(scm_terrain *t, const double *x, cm_error *err)
 {
     if (!t->tris)
         return cm_fail(err, CM_ERR_STATE, "scm_terrain_step before scm_terrain_set_surface");
@@ -367,11 +447,13 @@ int scm_terrain_step(scm_terrain *t, const double *x, const double *v, double dt
     t->prof.raster += t1 - t0;
     if (rc)
         return rc;
-    soil(t, x, v);
+    slide(t, x);
     double t2 = cm_now();
-    t->prof.soil += t2 - t1;
-    shear(t, x, v, dt);
-    t->prof.shear += cm_now() - t2;
+    soil(t, x);
+    double t3 = cm_now();
+    t->prof.soil += t3 - t2;
+    contact(t, x);
+    t->prof.shear += (t2 - t1) + (cm_now() - t3);
     t->prof.steps++;
     return CM_OK;
 }
@@ -403,5 +485,14 @@ double scm_terrain_cell_zmax(const scm_terrain *t, int i, int j) { return t->zma
 double scm_terrain_cell_pressure(const scm_terrain *t, int i, int j) { return t->press[cell_index(t, i, j)]; }
 double scm_terrain_node_shear(const scm_terrain *t, int node)
 {
-    return node >= 0 && node < t->nn ? t->j[node] : 0.0;
+    if (!(node >= 0 && node < t->nn))
+        return 0.0;
+    const double *e = t->e + 3 * (size_t)node;
+    return t->jp[node] + sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+}
+
+void scm_terrain_node_shear_elastic(const scm_terrain *t, int node, double e[3])
+{
+    for (int a = 0; a < 3; a++)
+        e[a] = node >= 0 && node < t->nn ? t->e[3 * node + a] : 0.0;
 }

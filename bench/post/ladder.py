@@ -7,8 +7,11 @@ and 95 % intervals that fem_server's statistics give).
 usage: bench/post/ladder.py OUT.png [--title TEXT] LABEL=FILE.csv [LABEL=FILE.csv ...]
 
 A CSV without a `tire` column is an elastic-tire sweep. Each LABEL names the
-terrain (e.g. "DEM", "SCM"); the tire is added from the file. Points are
-plotted with their 95 % intervals; wall time on a log axis.
+terrain (e.g. "DEM", "SCM calibrated"); the tire is added from the file, and
+several files may share a LABEL (e.g. one sweep per slip). Each LABEL gets
+its own line style, in the order given (dashed, solid, dotted, dash-dot),
+each tire its marker. Points are plotted with their 95 % intervals; wall
+time on a log axis.
 """
 import csv
 import sys
@@ -38,11 +41,14 @@ def main():
     if len(args) >= 2 and args[0] == "--title":
         title, args = args[1], args[2:]
     series = {}
+    label_style, styles = {}, {}
     for arg in args:
         label, path = arg.split("=", 1)
+        label_style.setdefault(label, ["--", "-", ":", "-."][len(label_style) % 4])
         for r in read(path):
             key = "%s, %s tire" % (label, r.get("tire", "elastic"))
             series.setdefault(key, []).append(r)
+            styles[key] = label_style[label]
     fig, axes = plt.subplots(2, 2, figsize=(11, 8), sharex=True)
     panels = [("T_P_mean_N", "T_P_ci95_N", "drawbar pull T_P [N]", 1.0),
               ("T_H_mean_N", "T_H_ci95_N", "gross traction T_H [N]", 1.0),
@@ -52,7 +58,7 @@ def main():
         rows = sorted(series[key], key=lambda r: float(r["slip_percent"]))
         slip = [float(r["slip_percent"]) for r in rows]
         tire = "rigid" if "rigid" in key else "elastic"
-        ls = "-" if key.startswith("SCM") else "--"
+        ls = styles[key]
         for ax, (col, ci, name, scale) in zip(axes.flat, panels):
             y = [scale * float(r[col]) for r in rows]
             e = [scale * float(r[ci]) for r in rows]

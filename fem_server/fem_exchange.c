@@ -186,16 +186,17 @@ static int stage_place_wheel(fem_coupled *c, const exchange *x, cm_error *err)
         double lowest = c->x_prev[2];
         for (uint32_t i = 1; i < c->nn; i++)
             lowest = c->x_prev[3 * i + 2] < lowest ? c->x_prev[3 * i + 2] : lowest;
-        const double down = lowest - (bed_top + c->drive->start_gap);
         /* the DEM's first forces were those of the tire where the scene put
-         * it: raising it out of the grains would keep forces it never felt */
-        if (down < 0.0)
+         * it: lifting it out of the grains would keep forces it never felt
+         * (lifting a tire that is clear of them is fine: a large start_gap) */
+        if (lowest < bed_top)
             return cm_fail(err, CM_ERR_RANGE,
                            "wheel.center: the tire starts inside the bed: its lowest point (z = %.4f m) is %.1f mm "
-                           "below the highest grain top (z = %.4f m) plus wheel.start_gap; raise wheel.center[2] "
-                           "by at least that (to %.4f m or more)",
-                           lowest, -1e3 * down, bed_top, c->ds.center[2] - down);
-        c->ds.center[2] -= down;
+                           "below the highest grain top (z = %.4f m); raise wheel.center[2] by at least that plus "
+                           "wheel.start_gap (to %.4f m or more)",
+                           lowest, 1e3 * (bed_top - lowest), bed_top,
+                           c->ds.center[2] + bed_top + c->drive->start_gap - lowest);
+        c->ds.center[2] += bed_top + c->drive->start_gap - lowest;
         cm_log_info("bed surface at z = %.4f m (highest grain top %.4f m): wheel lowered to %.1f mm above it", bed,
                     bed_top, 1e3 * c->drive->start_gap);
     }

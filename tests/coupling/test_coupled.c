@@ -444,8 +444,10 @@ static int guard_grain_non_finite(void)
     return stopped_by_guard(SCENES "tire_small.cfg", "nonfinite", extra, "dem", "non-finite", "coupling.dt");
 }
 
-/* The wheel's centre so low that the tire starts among the grains (the bed
- * is ~35 mm high, the tire's lowest point at 18 mm): refused at the first
+/* The wheel's centre so low that the tire starts among the grains (the
+ * highest grain top at 49 mm, the tire's lowest point at 17 mm; a tire clear
+ * of the grains is still lifted to a large start_gap, guard_grain_non_finite
+ * relies on it): refused at the first
  * exchange naming the key and the height needed, instead of being lifted
  * out with the forces of the grains it was inside (which the FEM's work
  * guard stopped as an "unstable coupling"). */

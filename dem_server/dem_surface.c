@@ -573,7 +573,7 @@ static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *s
  * (1 - s) delta_H gives y^2 = x^2 A0 / (x + A0), so
  *   x = (y^2 + y sqrt(y^2 + 4 A0^2)) / (2 A0)
  * and F depends on delta alone (conservative for a fixed triangle). Limits:
- * a coarse mesh (h >> a: the default tire, a/h ~ 0.15, k ~ 1.4) keeps nearly
+ * a coarse mesh (h >> a: the default tire, a/h ~ 0.17, k ~ 1.5) keeps nearly
  * Hertz with the tread's modulus; a mesh that resolves the patch (x -> inf)
  * leaves the contact the grain's own modulus, k E* <= e_grain =
  * E_grain / (1 - nu_grain^2), the FE carrying the tread's compliance. A

@@ -314,6 +314,7 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->x_lists = malloc(3 * (size_t)n_nodes * sizeof *s->x_lists);
     s->node_f = calloc(3 * (size_t)n_nodes, sizeof *s->node_f);
     s->tri = malloc(3 * (size_t)n_tris * sizeof *s->tri);
+    s->tri_h = malloc((size_t)n_tris * sizeof *s->tri_h);
     s->bvh = calloc(2 * (size_t)n_tris + 1, sizeof *s->bvh);
     s->perm = malloc((size_t)n_tris * sizeof *s->perm);
     s->scratch = calloc((size_t)n_threads, sizeof *s->scratch);
@@ -321,15 +322,19 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     for (int t = 0; t < n_threads && !bad; t++)
         bad = scratch_grow(&s->scratch[t], DEM_SURF_CAND_INIT);
     s->cand_cap_logged = DEM_SURF_CAND_INIT;
-    if (!s->x || !s->v || !s->x_lists || !s->node_f || !s->tri || !s->bvh || !s->perm || bad ||
+    if (!s->x || !s->v || !s->x_lists || !s->node_f || !s->tri || !s->tri_h || !s->bvh || !s->perm || bad ||
         dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
         dem_surface_free(&s);
         return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
     }
     memcpy(s->x, x0, 3 * (size_t)n_nodes * sizeof *s->x);
     memcpy(s->tri, tris, 3 * (size_t)n_tris * sizeof *s->tri);
-    for (int t = 0; t < n_tris; t++)
+    for (int t = 0; t < n_tris; t++) {
         s->perm[t] = t;
+        const int *tn = tris + 3 * t;
+        vec3 a = v3_load(x0 + 3 * tn[0]), b = v3_load(x0 + 3 * tn[1]), c = v3_load(x0 + 3 * tn[2]);
+        s->tri_h[t] = sqrt(v3_norm(v3_cross(v3_sub(b, a), v3_sub(c, a)))); /* sqrt(2 area) */
+    }
     bvh_build(s, 0, n_tris);
     dem_surface_refit(s);
     s->travel[0] = 1.0;
@@ -348,6 +353,7 @@ void dem_surface_free(dem_surface **sp)
     free(s->node_f);
     free(s->inv_mass);
     free(s->tri);
+    free(s->tri_h);
     free(s->bvh);
     free(s->perm);
     free(s->hist);
@@ -553,6 +559,36 @@ static int merge_patches(const dem_surface *s, vec3 c, double r, surf_scratch *s
     memcpy(cd, out, (size_t)e * sizeof *cd);
     sc->n_shared = e - m;
     return m;
+}
+
+/* The tread's compliance counted once (issue 16 item 2; DEM_SURF_FE_A0 in
+ * dem_surface.h has the measurements). Hertz's approach delta_H under a force
+ * F is the grain's and the tread's compliance together (E*, eq. 21); an FE
+ * tread whose nodes carry the contact's force deflects by a share
+ * s = x / (x + A0) of it itself, x = a_H / h (a_H = sqrt(R delta_H), h the
+ * contact triangle's size). The contact law keeps Hertz's form with the
+ * modulus raised so that its own overlap is the rest, delta = (1 - s) delta_H:
+ *   F = 4/3 k E* sqrt(R) delta^(3/2),  k = (1 - s)^(-3/2) = (1 + x/A0)^(3/2).
+ * With y = sqrt(R delta) / h the contact's own radius over h, delta =
+ * (1 - s) delta_H gives y^2 = x^2 A0 / (x + A0), so
+ *   x = (y^2 + y sqrt(y^2 + 4 A0^2)) / (2 A0)
+ * and F depends on delta alone (conservative for a fixed triangle). Limits:
+ * a coarse mesh (h >> a: the default tire, a/h ~ 0.17, k ~ 1.5) keeps nearly
+ * Hertz with the tread's modulus; a mesh that resolves the patch (x -> inf)
+ * leaves the contact the grain's own modulus, k E* <= e_grain =
+ * E_grain / (1 - nu_grain^2), the FE carrying the tread's compliance. A
+ * surface whose nodes do not yield (rigid, or no masses: inv_ms = 0) keeps
+ * k = 1. The same k scales the Mindlin stiffness G* (the tread's tangential
+ * compliance is in the FE's deflection too). Returns k. */
+static double surface_contact_stiffening(double R, double delta, double h, double E, double e_grain)
+{
+    if (!(delta > 0.0) || !(h > 0.0))
+        return 1.0;
+    const double a0 = DEM_SURF_FE_A0;
+    double y = sqrt(R * delta) / h;
+    double x = (y * y + y * sqrt(y * y + 4.0 * a0 * a0)) / (2.0 * a0);
+    double q = 1.0 + x / a0, k = q * sqrt(q);
+    return k * E > e_grain ? fmax(e_grain / E, 1.0) : k;
 }
 
 /* Contacts of one grain (slot i) with the surface; returns the number kept.
@@ -1063,6 +1099,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                     memset(hs + k * DEM_SURF_SLOT_SIZE, 0, DEM_SURF_SLOT_SIZE * sizeof *hs);
 
             const dem_pair_coef *cf = &w->coef[g->mat[i]][s->material];
+            const dem_material *mg = &w->mat[g->mat[i]];
+            const double e_grain = mg->young / (1.0 - mg->poisson * mg->poisson); /* the grain's own modulus */
             double m_i = 1.0 / g->inv_m[i];
             vec3 vi = v3(g->vx[i], g->vy[i], g->vz[i]), wi = v3(g->wx[i], g->wy[i], g->wz[i]);
             vec3 fsum = v3(0, 0, 0), tsum = v3(0, 0, 0);
@@ -1109,7 +1147,13 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 double m_pair = s->inv_mass ? 1.0 / (1.0 / m_i + inv_ms) : m_i;
                 double fn;
                 double delta = shaped ? sh_depth[a] : r - sqrt(cd[a].d2), Rc = shaped ? sh_r[a] : r;
-                vec3 F = dem_hm_force(cf, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
+                /* the tread's compliance once: the FE's share taken out of the law */
+                dem_pair_coef cs = *cf;
+                if (inv_ms > 0.0) {
+                    double k = surface_contact_stiffening(Rc, delta, s->tri_h[cd[a].tri], cf->E, e_grain);
+                    cs.E *= k, cs.G *= k;
+                }
+                vec3 F = dem_hm_force(&cs, nrm[a], delta, Rc, m_pair, vrel, dt, xi, &fn);
                 if (slot_of[a] >= 0) {
                     v3_store(xi + DEM_SURF_SLOT_N, nrm[a]);
                     xi[DEM_SURF_SLOT_USED] = 1.0;
@@ -1135,7 +1179,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
                 rc->overlap = delta / Rc;
                 rc->grain = i;
                 rc->tri = cd[a].tri;
-                rc->energy = dem_hertz_energy(cf, Rc, delta);
+                rc->energy = dem_hertz_energy(&cs, Rc, delta); /* with k frozen: an estimate (the guard's energy scale) */
             }
             g->surf_count[i] = m;
             g->fx[i] += fsum.x, g->fy[i] += fsum.y, g->fz[i] += fsum.z;

@@ -714,6 +714,66 @@ static int dent_slide_keeps_history(void)
 }
 
 /* Error paths name the culprit. */
+/* The tread's compliance counted once (issue 16 item 2, DEM_SURF_FE_A0): a
+ * steel grain pressed into a plane of rubber triangles of size h. Rigid
+ * (no node masses): Hertz with the tread's modulus. Yielding nodes: the
+ * contact's own overlap is the part of Hertz's approach the FE does not
+ * supply, delta = (1 - s) delta_H(F), s = x / (x + A0), x = a_H / h,
+ * a_H = sqrt(R delta_H); checked from the force back, at a coarse (h = 3 a),
+ * a matching (h = a) and a fine (h = a/3) mesh; and on a mesh far finer than
+ * the patch the contact is the grain's own modulus alone (a soil grain,
+ * E 0.5 GPa: k capped at E_grain* / E*). */
+static int fe_share_stiffening(void)
+{
+    const dem_material mats[2] = {test_material(2.1e11, 0.3, 1.0, 0.0), test_material(1.0e7, 0.45, 1.0, 0.0)};
+    const double delta = 0.04 * R0, Es = hertz_e_star(2.1e11, 0.3, 1.0e7, 0.45);
+    const double ac = sqrt(R0 * delta); /* the contact's own radius */
+    const double hs[4] = {3.0 * ac, ac, ac / 3.0, ac / 12.0};
+    for (int c = 0; c < 5; c++) {
+        const int soil = c == 4, yielding = c > 0;
+        const double h = hs[c == 0 ? 0 : c - 1];
+        dem_material m[2] = {mats[0], mats[1]};
+        if (soil)
+            m[0] = test_material(5.0e8, 0.3, 1.0, 0.0);
+        dem_world *w = test_world(m, 2, 5e-7, 4, NULL, 1);
+        ENSURE(w);
+        cm_error err = {0};
+        const int nx = (int)ceil(2.2 * R0 / h) + 1, nn = (nx + 1) * (nx + 1);
+        double *x = malloc(sizeof(double) * 3 * nn), *mass = malloc(sizeof(double) * nn);
+        int *t = malloc(sizeof(int) * 6 * nx * nx);
+        ENSURE(x && mass && t);
+        test_plane_mesh(nx, nx, h, -0.5 * nx * h + 0.3 * h, -0.5 * nx * h + 0.4 * h, 0.0, x, t);
+        for (int i = 0; i < nn; i++)
+            mass[i] = 1e-3;
+        ENSURE(dem_surface_set(w, nn, x, 2 * nx * nx, t, 1, &err) == 0);
+        if (yielding)
+            ENSURE(dem_surface_set_masses(w, mass, &err) == 0);
+        double p[3] = {0, 0, R0 - delta};
+        ENSURE(dem_grain_add(w, p, R0, 0, NULL, &err) == 0);
+        int rc = dem_step_surface(w, &err);
+        ENSURE_MSG(rc == 0, "%s", err.msg);
+        dem_grain_state g;
+        dem_grain_get(w, 0, &g);
+        const double F = g.f[2];
+        const double es = soil ? hertz_e_star(5.0e8, 0.3, 1.0e7, 0.45) : Es;
+        const double dH = hertz_static_overlap(es, R0, F), xh = sqrt(R0 * dH) / h, sh = xh / (xh + DEM_SURF_FE_A0);
+        printf("  %s grain, h = %.3g a_c, %s: F %.5g N, Hertz with the tread %.5g N; FE share s %.3f, "
+               "overlap / (1 - s) delta_H = %.9f\n", soil ? "soil" : "steel", h / ac, yielding ? "yielding" : "rigid",
+               F, hertz_force(es, R0, delta), yielding ? sh : 0.0, delta / ((1.0 - sh) * dH));
+        if (!yielding)
+            ENSURE_REL(F, hertz_force(es, R0, delta), 1e-9);
+        else if (!soil)
+            ENSURE_REL(delta, (1.0 - sh) * dH, 1e-9);
+        else /* capped: the grain's own modulus, 5e8 / (1 - 0.09) */
+            ENSURE_REL(F, hertz_force(5.0e8 / (1.0 - 0.09), R0, delta), 1e-9);
+        if (yielding && !soil)
+            ENSURE(F > hertz_force(es, R0, delta));
+        free(x), free(mass), free(t);
+        dem_world_destroy(&w);
+    }
+    return 0;
+}
+
 static int errors_name_culprit(void)
 {
     dem_material m = test_material(5e7, 0.3, 0.5, 0.5);
@@ -753,6 +813,7 @@ static const test_case tests[] = {
     {"concave_corner_contacts", concave_corner_contacts},
     {"dent_node_balance", dent_node_balance},
     {"dent_slide_keeps_history", dent_slide_keeps_history},
+    {"fe_share_stiffening", fe_share_stiffening},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

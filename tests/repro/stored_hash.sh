@@ -15,8 +15,8 @@
 # change was meant to leave results alone.
 set -uo pipefail
 src=$1 build=$2 mode=${3:-check}
-DEM_WANT=62d1b27869896cee
-FEM_WANT=1aec6eba67577c1f
+DEM_WANT=a3b7f971b88d967a
+FEM_WANT=a36cfade91676f11
 out=$(mktemp -d /tmp/demfem_repro_XXXXXX)
 trap 'rm -rf "$out"' EXIT
 DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_small.cfg" --out "$out/r" \

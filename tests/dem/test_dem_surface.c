@@ -713,7 +713,6 @@ static int dent_slide_keeps_history(void)
     return 0;
 }
 
-/* Error paths name the culprit. */
 /* The tread's compliance counted once (issue 16 item 2, DEM_SURF_FE_A0): a
  * steel grain pressed into a plane of rubber triangles of size h. Rigid
  * (no node masses): Hertz with the tread's modulus. Yielding nodes: the
@@ -774,6 +773,7 @@ static int fe_share_stiffening(void)
     return 0;
 }
 
+/* Error paths name the culprit. */
 static int errors_name_culprit(void)
 {
     dem_material m = test_material(5e7, 0.3, 0.5, 0.5);

@@ -664,6 +664,7 @@ static int dent_node_balance(void)
         ENSURE_NEAR(M[k], -GM[k], 1e-12 * fmag * RS);
     }
     ENSURE(tot.contacts >= 3);
+    dem_world_destroy(&w);
     return 0;
 }
 

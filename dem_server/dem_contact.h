@@ -143,6 +143,10 @@ static inline vec3 dem_rolling_torque(const dem_pair_coef *c, double R, double f
  * contact time) keeps the normal mode's ω dt below ~0.3: stable for any
  * μ_r up to ~3. */
 #define DEM_ROLLING_DAMPING_RATIO 0.3
+/* A sphere's I + m r^2 over I (I = 2/5 m r^2): the pair's rolling inertia is
+ * DEM_SPHERE_ROLL_INERTIA / (1/I_i + 1/I_j), a wall contact's
+ * DEM_SPHERE_ROLL_INERTIA I_i */
+#define DEM_SPHERE_ROLL_INERTIA 3.5
 
 static inline vec3 dem_rolling_spring(const dem_pair_coef *c, double R, double delta, double fn, vec3 wrel,
                                       double i_r, double dt, double th[3])

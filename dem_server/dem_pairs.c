@@ -82,9 +82,9 @@ static inline __attribute__((always_inline)) int pair_force(const pair_arrays *g
     vec3 nxf = v3_cross(n, F);
     vec3 Ti = v3_scale(nxf, -li), Tj = v3_scale(nxf, -lj);
     if (cf->mu_roll > 0.0) {
+        const double i_r = DEM_SPHERE_ROLL_INERTIA / (g->inv_i[i] + g->inv_i[j]);
         vec3 tr = g->roll_spring
-                      ? dem_rolling_spring(cf, R, delta, fn, v3_sub(wi, wj), 3.5 / (g->inv_i[i] + g->inv_i[j]),
-                                           g->dt, xi + DEM_HIST_TANGENTIAL)
+                      ? dem_rolling_spring(cf, R, delta, fn, v3_sub(wi, wj), i_r, g->dt, xi + DEM_HIST_TANGENTIAL)
                       : dem_rolling_torque(cf, R, fn, v3_sub(wi, wj), 1.0 / (g->inv_i[i] + g->inv_i[j]), g->dt);
         Ti = v3_add(Ti, tr);
         Tj = v3_sub(Tj, tr);
@@ -350,7 +350,7 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
             double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
             double mrR = cmr[c] * R;
             double kr = 1.5 * sn * mrR * mrR;
-            double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(3.5 / (inv_i[i] + inv_i[j]) * kr);
+            double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]) * kr);
             double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
             double ux = dt * rwx + u0x, uy = dt * rwy + u0y, uz = dt * rwz + u0z;
             double mx = ux * -kr - rwx * cr, my = uy * -kr - rwy * cr, mz = uz * -kr - rwz * cr;

@@ -100,9 +100,9 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             double fn;
             /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
             vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
-            vec3 Tr = !roll_spring  ? dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt)
-                      : cf->mu_roll > 0.0 ? dem_rolling_spring(cf, r, delta, fn, wi, 3.5 / g->inv_i[i], dt,
-                                                               xi + DEM_HIST_TANGENTIAL)
+            const double i_r = DEM_SPHERE_ROLL_INERTIA / g->inv_i[i];
+            vec3 Tr = !roll_spring        ? dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt)
+                      : cf->mu_roll > 0.0 ? dem_rolling_spring(cf, r, delta, fn, wi, i_r, dt, xi + DEM_HIST_TANGENTIAL)
                                           : v3(0, 0, 0);
             vec3 T = v3_add(v3_cross(lever, F), Tr);
             g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;

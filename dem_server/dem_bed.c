@@ -32,6 +32,7 @@ dem_bed_params dem_bed_params_default(void)
     p.settle_ke = 1e-7;
     p.settle_min_time = 0.05;
     p.settle_max_time = 3.0;
+    p.settle_friction = -1.0;
     return p;
 }
 
@@ -238,6 +239,23 @@ static int add_box_walls(dem_world *w, const dem_bed_params *p, cm_error *err)
     return CM_OK;
 }
 
+/* Sets every pair's sliding friction to mu and its rolling resistance to 0
+ * (settle_friction), keeping the materials' coefficients in `keep`; with
+ * keep NULL restores them from `from`. */
+static void settle_coefficients(dem_world *w, double mu, dem_pair_coef (*keep)[DEM_MAX_MATERIALS],
+                                const dem_pair_coef (*from)[DEM_MAX_MATERIALS])
+{
+    for (int a = 0; a < w->n_mat; a++)
+        for (int b = 0; b < w->n_mat; b++) {
+            dem_pair_coef *c = &w->coef[a][b];
+            if (keep) {
+                keep[a][b] = *c;
+                c->mu = mu, c->mu_roll = 0.0;
+            } else
+                c->mu = from[a][b].mu, c->mu_roll = from[a][b].mu_roll;
+        }
+}
+
 int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, cm_error *err)
 {
     double dt_run = w->def.dt;
@@ -245,6 +263,9 @@ int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, v
         w->def.dt = p->settle_dt;
         w->prepared = 0;
     }
+    dem_pair_coef kept[DEM_MAX_MATERIALS][DEM_MAX_MATERIALS];
+    if (p->settle_friction >= 0.0)
+        settle_coefficients(w, p->settle_friction, kept, NULL);
     int rc = CM_OK;
     double ke_grain = INFINITY;
     double t_start = w->time;
@@ -275,6 +296,8 @@ int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, v
     if (rc == CM_OK)
         cm_log_info("bed settled: %d grains, t = %.4f s (%ld steps), KE/grain = %.3g J", w->g.n, w->time - t_start,
                     w->step, ke_grain);
+    if (p->settle_friction >= 0.0)
+        settle_coefficients(w, 0.0, NULL, (const dem_pair_coef(*)[DEM_MAX_MATERIALS])kept);
     /* the settled state is the start of a run: at rest, clock at zero */
     for (int i = 0; i < w->g.n; i++)
         w->g.vx[i] = w->g.vy[i] = w->g.vz[i] = w->g.wx[i] = w->g.wy[i] = w->g.wz[i] = 0.0;
@@ -322,6 +345,8 @@ void dem_bed_params_text(const dem_world *w, const dem_bed_params *p, char *buf,
         d->gravity[2], d->damping);
     if (d->rolling_model != DEM_ROLLING_CONSTANT_TORQUE) /* the default's text is unchanged: its caches stay valid */
         PUT(";roll=%d", d->rolling_model);
+    if (p->settle_friction >= 0.0) /* likewise */
+        PUT(";sfric=%.17g", p->settle_friction);
 #undef PUT
 }
 

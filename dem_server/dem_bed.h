@@ -43,6 +43,9 @@ typedef struct dem_bed_params {
     double settle_min_time;        /* s, settle at least this long */
     double settle_max_time;        /* s, fail if not settled by then */
     double settle_dt;              /* s, step used while settling (<= 0: the world's dt) */
+    double settle_friction;        /* sliding friction of every contact while settling, rolling resistance off
+                                    * then (< 0: the materials' own); a denser bed, as pouring with lubricated
+                                    * grains gives; the materials' values act from the run's first step */
     char file[1024];               /* HDF5 cache; "" = none */
 } dem_bed_params;
 

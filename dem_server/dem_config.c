@@ -152,7 +152,8 @@ static int read_bed(cm_scene *s, dem_config *c, cm_error *err)
                                   err)) ||
         (rc = cm_scene_double_opt(s, "dem.bed.settle_max_time", 0.0, 1e4, b->settle_max_time, &b->settle_max_time,
                                   err)) ||
-        (rc = cm_scene_double_opt(s, "dem.bed.settle_dt", 0.0, 1.0, 0.0, &b->settle_dt, err)))
+        (rc = cm_scene_double_opt(s, "dem.bed.settle_dt", 0.0, 1.0, 0.0, &b->settle_dt, err)) ||
+        (rc = cm_scene_double_opt(s, "dem.bed.settle_friction", 0.0, 2.0, -1.0, &b->settle_friction, err)))
         return rc;
     b->seed = (uint64_t)seed;
     char file[1024] = "";

@@ -379,11 +379,92 @@ static int config_read(void)
     return 0;
 }
 
+/* The bed's floor and side walls (as dem_bed_build adds them), material 0. */
+static int add_box_walls_for_test(dem_world *w, const dem_bed_params *p, cm_error *err)
+{
+    const double *lo = p->box_min, *hi = p->box_max;
+    double pts[5][3] = {{lo[0], lo[1], lo[2]}, {lo[0], lo[1], lo[2]}, {hi[0], hi[1], lo[2]}, {lo[0], lo[1], lo[2]},
+                        {hi[0], hi[1], lo[2]}};
+    double nrm[5][3] = {{0, 0, 1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
+    for (int k = 0; k < 5; k++)
+        if (dem_wall_add(w, pts[k], nrm[k], 0, err))
+            return -1;
+    return 0;
+}
+
+/* dem.bed.settle_friction: a bed settled with lubricated grains (friction 0,
+ * no rolling resistance) packs denser than one settled with the material's
+ * friction 0.5 (random close against random loose packing: the mean surface
+ * lower by more than 3 %). The cache key knows the settling friction (the
+ * material-friction bed does not load the lubricated one), and a bed settled
+ * lubricated starts from the same state whether settled now or read from
+ * the cache (as settled_equals_cached). dem_bed_settle gives the world its
+ * material friction back: every grain of the settled bed set spinning about
+ * z at 20 rad/s has lost most of its spin 200 steps (8 ms) later (its
+ * contacts' sliding friction brakes it), where frictionless grains, with no
+ * rolling resistance either, would keep it. */
+static int settle_friction(void)
+{
+    char path[] = "/tmp/dem_bed_lube_XXXXXX";
+    int fd = mkstemp(path);
+    ENSURE(fd >= 0);
+    close(fd);
+    unlink(path);
+    dem_bed_params p = small_bed(400);
+    p.settle_min_time = 0.05;
+    p.settle_ke = 1e-8;
+    cm_error err = {0};
+    bool loaded;
+    dem_world *a = bed_world(400, 1);
+    ENSURE_MSG(a && dem_bed_build(a, &p, NULL, NULL, &loaded, &err) == 0, "%s", err.msg);
+    dem_bed_params q = p;
+    q.settle_friction = 0.0;
+    snprintf(q.file, sizeof q.file, "%s", path);
+    dem_world *b = bed_world(400, 1), *c = bed_world(400, 1), *d = bed_world(400, 1), *e = bed_world(400, 1);
+    ENSURE(b && c && d && e);
+    ENSURE_MSG(dem_bed_build(b, &q, NULL, NULL, &loaded, &err) == 0 && !loaded, "%s", err.msg);
+    ENSURE_MSG(dem_bed_build(c, &q, NULL, NULL, &loaded, &err) == 0 && loaded, "%s", err.msg);
+    ENSURE(dem_bed_load(d, &p, path, &err) == CM_WARN_STALE);
+    double ha = dem_bed_height(a), hb = dem_bed_height(b);
+    printf("mean surface: settled with friction 0.5 %.5f m, lubricated %.5f m (%.2f %% lower)\n", ha, hb,
+           100 * (1 - hb / ha));
+    ENSURE(hb < 0.97 * ha);
+    ENSURE(dem_world_hash(b) == dem_world_hash(c));
+    /* the settling itself, without the cache's scratch world */
+    ENSURE(add_box_walls_for_test(e, &q, &err) == 0 && dem_bed_place(e, &q, &err) == 0);
+    ENSURE_MSG(dem_bed_settle(e, &q, NULL, NULL, &err) == 0, "%s", err.msg);
+    const double w0 = 20.0;
+    int n = dem_grain_count(e);
+    for (int i = 0; i < n; i++) {
+        dem_grain_state g;
+        dem_grain_get(e, i, &g);
+        double v[3] = {0, 0, 0}, om[3] = {0, 0, w0};
+        ENSURE(dem_grain_set(e, i, g.x, v, om) == 0);
+    }
+    for (int k = 0; k < 200; k++)
+        ENSURE(dem_step(e, &err) == 0);
+    double wz = 0;
+    for (int i = 0; i < n; i++) {
+        dem_grain_state g;
+        dem_grain_get(e, i, &g);
+        wz += g.w[2] / n;
+    }
+    printf("grains set spinning at %.1f rad/s: mean spin %.3f rad/s after 200 steps\n", w0, wz);
+    ENSURE(fabs(wz) < 0.2 * w0);
+    dem_world_destroy(&a);
+    dem_world_destroy(&b);
+    dem_world_destroy(&c);
+    dem_world_destroy(&d);
+    dem_world_destroy(&e);
+    unlink(path);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"settled_bed", settled_bed}, {"determinism", determinism}, {"bed_cache", bed_cache},
     {"settled_equals_cached", settled_equals_cached},
     {"other_code_refused", other_code_refused},
-    {"output_files", output_files}, {"config_read", config_read},
+    {"output_files", output_files}, {"config_read", config_read}, {"settle_friction", settle_friction},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

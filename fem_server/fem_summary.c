@@ -120,7 +120,8 @@ typedef struct summary_result {
      * all of the steady part; travel (m), then mean and half-width of T_H,
      * T_R, T_P, load, sinkage */
     double conv[4][11];
-    char warning[600];
+    char warning[600]; /* the load check */
+    char drift[400];   /* the sinkage check: still changing over the averaged part */
 } summary_result;
 
 static const char *const k_control[] = {"slip", "torque", "drawbar"};
@@ -225,6 +226,24 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
             r->conv[f][2 + 2 * k] = cs.half_width;
         }
     }
+    /* the sinkage check: MSER truncates at most half the travel, so a wheel
+     * still sinking (or digging in) at the end gets a "steady" part that is
+     * not: the means of its two halves differ by more than both their 95 %
+     * intervals and 5 % of the sinkage */
+    if (end > start + 8) {
+        size_t mid = start + (end - start) / 2;
+        steady_stats h1, h2;
+        steady_summary(tr[C_SINK], mid, start, &h1);
+        steady_summary(tr[C_SINK], end, mid, &h2);
+        double dz = h2.mean - h1.mean;
+        if (fabs(dz) > h1.half_width + h2.half_width && fabs(dz) > 0.05 * fabs(r->q[Q_SINK].mean))
+            snprintf(r->drift, sizeof r->drift,
+                     "the sinkage is not steady over the averaged part (t = %.3f to %.3f s): %.1f mm over its first "
+                     "half, %.1f mm over its second (95 %% intervals +-%.1f, +-%.1f mm); the wheel is still %s: its "
+                     "means are not a steady state (travel longer, or see whether it digs in)",
+                     r->t_start, r->t_end, 1e3 * h1.mean, 1e3 * h2.mean, 1e3 * h1.half_width, 1e3 * h2.half_width,
+                     dz > 0 ? "sinking" : "rising");
+    }
     /* the load check */
     if (d->target_load > 0 && fabs(W - d->target_load) > 0.10 * d->target_load) {
         if (d->motion == DRIVE_SINK_TRAVEL)
@@ -277,6 +296,8 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
         cm_log_info("  soil force along the travel %.2f N against the drawbar load %g N", r->q[Q_FX].mean, d->drawbar);
     if (r->warning[0])
         cm_log_warn("%s", r->warning);
+    if (r->drift[0])
+        cm_log_warn("%s", r->drift);
 }
 
 static int write_h5(const char *path, const fem_summary_def *d, const summary_result *r, cm_error *err)
@@ -304,7 +325,7 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
                attr_double(g, "steady_exchanges", (double)(r->end - r->start)) ||
                attr_double(g, "lug_periods", r->lug_periods) || attr_double(g, "lug_period_rad", d->lug_period) ||
                attr_double(g, "target_load", d->target_load) || attr_string(g, "control", k_control[d->control]) ||
-               attr_string(g, "load_warning", r->warning);
+               attr_string(g, "load_warning", r->warning) || attr_string(g, "drift_warning", r->drift);
         if (r->travelled)
             bad |= write_matrix(g, "quantities", &rows[0][0], NQ, NSTAT) ||
                    write_matrix(g, "convergence", &r->conv[0][0], 4, 11) ||
@@ -396,6 +417,11 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
     fputs("]},\n  \"warnings\": [", f);
     if (r->warning[0])
         cm_json_string(f, r->warning);
+    if (r->drift[0]) {
+        if (r->warning[0])
+            fputs(", ", f);
+        cm_json_string(f, r->drift);
+    }
     fputs("]\n}\n", f);
     int bad = ferror(f);
     if (fclose(f) != 0 || bad || rename(tmp, path) != 0) {

@@ -504,7 +504,8 @@ static int light_nodes_stable(void)
 
 /* ---- the exchange's interface work with light tread nodes ------------------ */
 
-/* The calibrated sand of scenes/default.cfg (bench/calibrate), K given. */
+/* The session-6 calibrated sand (bench/calibrate, constant-torque rolling law; scenes/default.cfg's scm.soil
+ * until session 8), K given: a sand with cohesion, so that the shear patch carries c A too. */
 static scm_soil calibrated_soil(double K)
 {
     scm_soil s = scm_soil_default();

@@ -19,7 +19,8 @@ and sinkage_per_radius (sinkage/R) take an ABSOLUTE tolerance (0.02 means
 pull crosses zero near 10-15 % slip, where an error relative to it means
 nothing. The other quantities take a relative tolerance (5% or 0.05).
 Its settings (the knobs of that run, not the study's shortened
-travel) go to stdout, one KEY=VALUE per line, for `./run` to pass as --set;
+travel) go to stdout, one KEY=VALUE per line, for `./run` to pass as --set
+(`terrain=dem|scm`, the study's terrain knob, `./run` turns into --terrain);
 what was chosen and why goes to stderr. A run's error is measured against
 the study's reference (its finest run, whose own error is taken as its 95 %
 confidence interval, or the closed form): a tolerance

@@ -134,10 +134,46 @@ def launcher_refuses():
     ensure("[accuracy] refused: no setting in" in log and "[dem]" not in log and "[fem]" not in log, log)
 
 
+def terrain_chosen():
+    # A study whose terrain knob put SCM on the front: within 5 % of the peak
+    # force SCM (2 %, 0.3 s) is cheaper than the DEM (0.3 %, 0.8 s), and the
+    # choice is a terrain=scm line; within 1 % only the DEM is.
+    scene = with_target(PLATE, 'quantity = "peak_force"; tolerance = 0.05; study = "terrain_plate";')
+    try:
+        rc, out, err = choose(scene)
+        ensure(rc == 0 and out == ["terrain=scm", "coupling.dt=1e-06"], (rc, out, err))
+        rc, out, err = choose(scene, "--accuracy", "peak_force=1%")
+        ensure(rc == 0 and out == ["terrain=dem", "coupling.dt=1e-06"], (rc, out, err))
+    finally:
+        os.unlink(scene)
+
+
+def launcher_runs_chosen_terrain():
+    # ./run turns the chosen terrain=scm into scm_server on the terrain side
+    # (the plate scene with a soil 1 mm below the plate: scm_server attaches,
+    # exchanges with the plate peer to the end and reports its work), unless
+    # the user names the terrain program themselves.
+    text = open(PLATE).read().replace("run = {", "run = { target = { quantity = \"peak_force\"; tolerance = 0.05; "
+                                      "study = \"terrain_plate\"; };", 1)
+    text += "\nscm = { surface_height = -0.001; grid = { min = [-0.05, -0.05]; max = [0.05, 0.05]; }; };\n"
+    fd, scene = tempfile.mkstemp(suffix=".cfg", dir="/tmp")
+    os.write(fd, text.encode())
+    os.close(fd)
+    try:
+        rc, log = launcher(scene)
+        ensure(rc == 0, log)
+        ensure("[accuracy] terrain: scm" in log and "scm_server" in log and "[scm] coupled run finished" in log, log)
+        ensure("[dem]" not in log, log)
+        rc, log = launcher(scene, "--terrain", "dem")
+        ensure(rc == 0 and "[accuracy] terrain" not in log and "[dem]" in log and "[scm]" not in log, log)
+    finally:
+        os.unlink(scene)
+
+
 CASES = {f.__name__: f for f in (picks_fastest_within_tolerance, refuses_below_noise_floor, refuses_below_seed_spread,
                                  refuses_when_none_meets,
                                  bad_targets_refused, scene_target_read, launcher_runs_chosen_settings,
-                                 launcher_refuses)}
+                                 launcher_refuses, terrain_chosen, launcher_runs_chosen_terrain)}
 
 if __name__ == "__main__":
     if len(sys.argv) < 2 or sys.argv[1] not in CASES:

@@ -752,9 +752,14 @@ static int slot_by_tag(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-/* A history table emptied at exactly `cap` entries (one process's size). */
+/* A history table emptied at exactly `cap` entries (one process's size; 0:
+ * a table never used, as a new world's). */
 static int hash_exact(dem_hash *h, int cap)
 {
+    if (cap == 0) {
+        dem_hash_free(h);
+        return CM_OK;
+    }
     if (h->cap != cap) {
         uint64_t *k = realloc(h->key, (size_t)cap * sizeof *k);
         if (!k)
@@ -960,8 +965,10 @@ static int gather_into(dem_world *w, dem_world *dst, int collecting, cm_error *e
             free(all);
             return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
         }
-        memcpy(h->key, src->key, (size_t)src->cap * sizeof *h->key);
-        memcpy(h->row, src->row, (size_t)src->cap * sizeof *h->row);
+        if (src->cap > 0) {
+            memcpy(h->key, src->key, (size_t)src->cap * sizeof *h->key);
+            memcpy(h->row, src->row, (size_t)src->cap * sizeof *h->row);
+        }
         h->count = src->count;
     }
     /* the wall contacts in the global order: places from each rank's first grain */

@@ -14,11 +14,17 @@ static inline uint64_t mix(uint64_t k)
     return k;
 }
 
-int dem_hash_reset(dem_hash *h, int n)
+int dem_hash_cap_for(long n)
 {
     int want = 16;
     while (want < 2 * n + 16)
         want *= 2;
+    return want;
+}
+
+int dem_hash_reset(dem_hash *h, int n)
+{
+    const int want = dem_hash_cap_for(n);
     if (want > h->cap) {
         uint64_t *k = realloc(h->key, (size_t)want * sizeof *k);
         if (!k)

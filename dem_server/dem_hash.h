@@ -29,6 +29,8 @@ static inline uint64_t dem_pair_key(int a, int b)
     return ((uint64_t)lo << 32) | hi;
 }
 
+/* The capacity dem_hash_reset gives an empty table for n keys. */
+int dem_hash_cap_for(long n);
 /* Empties the table, growing it to hold at least n keys at <= 50 % load. */
 int dem_hash_reset(dem_hash *h, int n);
 void dem_hash_free(dem_hash *h);

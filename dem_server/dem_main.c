@@ -129,22 +129,48 @@ typedef struct output_ctx {
     dem_window *window; /* saved in checkpoints (NULL = none) */
     const char *resume_path;  /* checkpoint to resume from, NULL for a fresh run */
     long resume_exchange;
-    /* distributed run: frames of the whole world gathered into `view` (rank 0) */
+    /* distributed run: the whole world gathered into `view` (rank 0) for
+     * frames, series rows and checkpoints, as one process holds it */
     int distributed, frames;  /* frames: rank 0 writes an output (the same on every rank) */
     dem_world *view;
+    long view_step;           /* DEM step the view was gathered at (-1: none) */
 } output_ctx;
+
+#ifdef DEMFEM_MPI
+/* The view of the current state (collective; gathered once per step: the
+ * frame, the series row and the checkpoint of one exchange share it). */
+static int gather_view(dem_world *w, output_ctx *c, cm_error *err)
+{
+    const long step = dem_world_steps(w);
+    if (c->view_step == step)
+        return CM_OK;
+    int rc = dem_mpi_gather(w, c->view, err);
+    if (rc == CM_OK)
+        c->view_step = step;
+    return rc;
+}
+#endif
 
 /* Writes grain frames and series lines at the configured step intervals. */
 static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
 {
 #ifdef DEMFEM_MPI
-    if (c->distributed) { /* every rank: the gather is collective */
+    if (c->distributed) { /* every rank: the gather is collective; rank 0 writes what one process writes */
         const long step = dem_world_steps(w);
-        if (!c->frames || step - c->last_frame < c->cfg->output_every)
+        const int series = step - c->last_series >= c->cfg->series_every;
+        const int frame = step - c->last_frame >= c->cfg->output_every;
+        if (!c->frames || (!series && !frame))
             return CM_OK;
-        c->last_frame = step;
-        int rc = dem_mpi_gather(w, c->view, err);
-        return rc == CM_OK && g_rank == 0 ? dem_output_frame(c->out, c->view, err) : rc;
+        int rc = gather_view(w, c, err);
+        if (series)
+            c->last_series = step;
+        if (frame)
+            c->last_frame = step;
+        if (rc || g_rank != 0)
+            return rc;
+        if (series && (rc = dem_output_series(c->out, c->view, err)))
+            return rc;
+        return frame ? dem_output_frame(c->out, c->view, err) : CM_OK;
     }
 #endif
     if (!c->out)
@@ -237,6 +263,14 @@ static int coupled_agree_rebuild(dem_world *w, void *user, cm_error *err)
 static int write_checkpoint(dem_world *w, const dem_coupled_state *st, void *user, cm_error *err)
 {
     output_ctx *c = user;
+#ifdef DEMFEM_MPI
+    if (c->distributed) { /* every rank: rank 0 writes the gathered world, one process's checkpoint */
+        int rc = gather_view(w, c, err);
+        if (rc || g_rank != 0)
+            return rc;
+        w = c->view;
+    }
+#endif
     dem_ckpt_outputs o = {.last_frame = c->last_frame, .last_series = c->last_series};
     dem_output_counts(c->out, &o.frames, &o.series_rows);
     double t0 = cm_now();
@@ -352,6 +386,57 @@ static void report_profile(const dem_profile *p, const dem_coupled_profile *c, c
         cm_log_warn("cannot write %s", path);
 }
 
+/* DIR/dem_profile_ranks.csv, one row per rank (rank 0 writes; every rank
+ * calls it, the rows are gathered): its grains and ghosts at the end, the
+ * steps, and the step's time split into compute (the stages without their
+ * communication: rebuild - migrate + surface - surf_gather + pairs +
+ * integrate), halo (ghost refresh and the agreed rebuild decision), migrate
+ * (slabs, migration, ghosts at a rebuild), surf_gather (the surface
+ * contacts reduced on rank 0) and, coupled, surf_bcast (the reply from rank
+ * 0, which the other ranks wait in) and wait (rank 0: for fem_server). One
+ * process writes its one row the same way (zeros for the communication). */
+enum { RANK_COLS = 10 };
+
+static void report_rank_profiles(const dem_profile *p, const dem_coupled_profile *c, int owned, int ghosts,
+                                 const char *dir)
+{
+    const double compute = p->rebuild - p->migrate + p->surface - p->surf_gather + p->pairs + p->integrate;
+    const double mine[RANK_COLS] = {owned,         ghosts,           (double)p->steps, compute,
+                                    p->halo,       p->migrate,       p->surf_gather,   c ? c->bcast : 0.0,
+                                    c ? c->wait : 0.0, p->rebuild + p->surface + p->pairs + p->integrate + p->halo};
+    double *all = g_rank == 0 ? malloc((size_t)g_ranks * sizeof mine) : NULL;
+    if (g_rank == 0 && !all)
+        cm_log_warn("out of memory for the ranks' profiles");
+#ifdef DEMFEM_MPI
+    if (g_ranks > 1)
+        MPI_Gather(mine, RANK_COLS, MPI_DOUBLE, all, RANK_COLS, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    else
+#endif
+        if (all)
+        memcpy(all, mine, sizeof mine);
+    if (!all || !dir) {
+        free(all);
+        return;
+    }
+    char path[1200];
+    snprintf(path, sizeof path, "%s/dem_profile_ranks.csv", dir);
+    FILE *f = fopen(path, "w");
+    if (!f) {
+        cm_log_warn("cannot write %s: %s", path, strerror(errno));
+        free(all);
+        return;
+    }
+    fprintf(f, "rank,ranks,grains,ghosts,steps,compute_s,halo_s,migrate_s,surf_gather_s,surf_bcast_s,wait_s,step_s\n");
+    for (int r = 0; r < g_ranks; r++) {
+        const double *v = all + (size_t)r * RANK_COLS;
+        fprintf(f, "%d,%d,%.0f,%.0f,%.0f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", r, g_ranks, v[0], v[1], v[2], v[3],
+                v[4], v[5], v[6], v[7], v[8], v[9]);
+    }
+    if (fclose(f) != 0)
+        cm_log_warn("cannot write %s", path);
+    free(all);
+}
+
 static int run(const options *o)
 {
     cm_error err = {0};
@@ -359,7 +444,7 @@ static int run(const options *o)
     dem_world *w = NULL;
     ipc_channel *ch = NULL;
     dem_window *window = NULL;
-    output_ctx octx = {0};
+    output_ctx octx = {.view_step = -1};
     char dem_path[1100] = ""; /* the checkpoint to resume from: octx.resume_path, for the whole run */
     cm_run_config rcfg;
     dem_config cfg;
@@ -493,9 +578,6 @@ static int run(const options *o)
             MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
             if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
                 goto fail;
-            if (g_rank == 0 && steps > 0 && octx.out)
-                cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
-                            "state only (its contact counts over ranks are phase 2 of issue 17)", g_ranks);
         }
 #endif
         for (long k = 0; k < steps && !g_sig->stop; k++) {
@@ -533,14 +615,12 @@ static int run(const options *o)
             MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
             if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
                 goto fail;
-            if (g_rank == 0 && octx.dir)
-                cm_log_warn("%d ranks: grain frames are gathered from every rank; dem_series.csv holds the initial "
-                            "state only, no checkpoints are written (a one-process checkpoint resumes on any "
-                            "number of ranks; issue 17)", g_ranks);
         }
 #endif
         dem_coupled_hooks hooks = {.after_exchange = after_exchange,
-                                   .checkpoint = octx.dir && g_ranks == 1 ? write_checkpoint : NULL,
+                                   /* distributed: every rank takes part (rank 0 writes) */
+                                   .checkpoint = octx.dir || (octx.distributed && octx.frames) ? write_checkpoint
+                                                                                               : NULL,
                                    .restore = o->resume ? restore_checkpoint : NULL,
                                    .user = &octx};
         cm_signals_graceful(octx.dir != NULL); /* from here a signal asks for a checkpoint */
@@ -568,10 +648,12 @@ static int run(const options *o)
         dem_stats s;
         dem_world_stats(w, &s);
         report_profile(&s.profile, o->standalone ? NULL : &cprof, octx.dir);
+        int owned = s.grains, ghosts = 0;
 #ifdef DEMFEM_MPI
         if (g_ranks > 1) {
             dem_mpi_stats ms;
             dem_mpi_stats_get(w, &ms);
+            owned = ms.owned, ghosts = ms.ghosts;
             cm_log_info("rank %d of %d: %d grains (+%d ghosts), cell columns [%d, %d), %ld migrated; halo %.2f s, "
                         "migration %.2f s", g_rank, g_ranks, ms.owned, ms.ghosts, ms.col_lo, ms.col_hi,
                         ms.migrated, s.profile.halo, s.profile.migrate);
@@ -585,6 +667,7 @@ static int run(const options *o)
                             (double)sizeof(double) * (double)ms.surf_doubles / (double)ms.surf_gathers);
         }
 #endif
+        report_rank_profiles(&s.profile, o->standalone ? NULL : &cprof, owned, ghosts, octx.dir);
     }
     goto cleanup;
 fail:

@@ -48,7 +48,19 @@ typedef struct dist_ctx {
     double *extra_val;
     size_t extra_cap;
     int *order;                /* cap: the kept slots at a rebuild */
+    /* rank 0: the capacities one process's two history tables would have
+     * (dem_hash_reset grows a table to hold the pairs of each list entered
+     * in it): the gathered list's table is rebuilt at that size, so that a
+     * checkpoint holds the same bytes */
+    int vcap[2];
+    double *wall_rec;          /* w->wall_rec: cap * wall_rec_nw records */
+    double *wsbuf, *wrbuf;     /* wall contacts gathered on rank 0 */
+    size_t wsbuf_cap, wrbuf_cap;
 } dist_ctx;
+
+static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n, cm_error *err);
+static int springs_from_table(dem_world *w, dist_ctx *d, cm_error *err);
+static int wall_rec_alloc(dem_world *w, dist_ctx *d);
 
 enum { REC_FIXED = 39, SPRING_REC_MAX = 2 + DEM_HIST_MAX };
 
@@ -207,8 +219,14 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     dist_ctx *d = w->dist_ctx;
     dem_grains *g = &w->g;
     const double t0 = cm_now();
-    const int own_lo = w->own_lo, own_hi = w->own_hi;
     int rc;
+    /* 0. rank 0 after a terrain window removal (collect, then rejoin): one
+     * process's list is empty, its springs wait in the history table; a
+     * list of them again, for the ranks the grains go to */
+    if (d->rank == 0 && !d->distributed && w->n_pairs == 0 && w->hist[w->hist_cur].count > 0 &&
+        (rc = springs_from_table(w, d, err)))
+        return rc;
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
     /* 1. the global box and grid (over the owned grains of every rank) */
     double box[6] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY}; /* lo, -hi */
     for (int i = own_lo; i < own_hi; i++) {
@@ -397,7 +415,27 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     rc = dem_neighbour_rebuild(w, err);
     w->hist_extra = NULL;
     w->hist_extra_val = NULL;
-    return rc;
+    if (rc)
+        return rc;
+    /* 7. the rows of left ghosts (their owner counts their contacts), and
+     * the pairs of one process's list (rows of owned grains) over the
+     * ranks: the size of the history table one process entered them in */
+    long rows = 0;
+    w->n_ghost_rows = 0;
+    for (int p = 0; p < w->n_pairs; p++) {
+        const int ghost = w->pi[p] < w->own_lo;
+        rows += !ghost;
+        w->n_ghost_rows += ghost && p < w->n_active_pairs;
+    }
+    long all_rows = 0;
+    if ((rc = MPI_Reduce(&rows, &all_rows, 1, MPI_LONG, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "reduce of the pair counts", w->step);
+    if (d->rank == 0) {
+        const int c = dem_hash_cap_for(all_rows);
+        if (c > d->vcap[w->hist_cur])
+            d->vcap[w->hist_cur] = c;
+    }
+    return CM_OK;
 }
 
 /* 9 doubles per grain: position, velocity, angular velocity. */
@@ -501,6 +539,9 @@ static void dist_release(dem_world *w)
     ctx_free(w->dist_ctx);
     w->dist = NULL;
     w->dist_ctx = NULL;
+    w->wall_rec = NULL;
+    w->wall_rec_nw = 0;
+    w->n_ghost_rows = 0;
 }
 
 static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release, dist_surf_gather};
@@ -522,6 +563,9 @@ static void ctx_free(dist_ctx *d)
     dem_hash_free(&d->extra);
     free(d->extra_val);
     free(d->order);
+    free(d->wall_rec);
+    free(d->wsbuf);
+    free(d->wrbuf);
     free(d);
 }
 
@@ -581,6 +625,14 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
     d->sdispl = d->scount + size, d->rcount = d->scount + 2 * size, d->rdispl = d->scount + 3 * size;
     d->hcount = d->scount + 4 * size, d->hdispl = d->scount + 5 * size, d->hrcount = d->scount + 6 * size;
     d->hrdispl = d->scount + 7 * size, d->hwhere = d->scount + 8 * size;
+    if (wall_rec_alloc(w, d)) {
+        ctx_free(d);
+        w->wall_rec = NULL;
+        return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory for the wall contacts");
+    }
+    /* rank 0 has been one process so far: its history tables' sizes are one process's */
+    d->vcap[0] = w->hist[0].cap, d->vcap[1] = w->hist[1].cap;
+    w->n_ghost_rows = 0;
     w->dist = &dist_ops;
     w->dist_ctx = d;
     w->own_lo = 0, w->own_hi = w->g.n; /* all on rank 0 until the first rebuild */
@@ -700,59 +752,266 @@ static int slot_by_tag(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
+/* A history table emptied at exactly `cap` entries (one process's size; 0:
+ * a table never used, as a new world's). */
+static int hash_exact(dem_hash *h, int cap)
+{
+    if (cap == 0) {
+        dem_hash_free(h);
+        return CM_OK;
+    }
+    if (h->cap != cap) {
+        uint64_t *k = realloc(h->key, (size_t)cap * sizeof *k);
+        if (!k)
+            return CM_ERR_NOMEM;
+        h->key = k;
+        int *r = realloc(h->row, (size_t)cap * sizeof *r);
+        if (!r)
+            return CM_ERR_NOMEM;
+        h->row = r;
+        h->cap = cap;
+    }
+    memset(h->key, 0xff, (size_t)cap * sizeof *h->key);
+    h->count = 0;
+    return CM_OK;
+}
+
+/* The wall forces one process sums (dem_step_surface): each thread from
+ * zero over its block of the grains (the stage's n grains split in
+ * w->n_threads blocks), the contacts in grain order, then the threads'
+ * sums added in thread order. recs: n_rec contacts in the global grain
+ * order, their places among the n grains global. */
+static void wall_forces_replay(dem_world *dst, int nt, const double *recs, long n_rec, long n)
+{
+    double part[DEM_MAX_WALLS][3];
+    for (int k = 0; k < dst->n_walls; k++)
+        memset(dst->walls[k].force, 0, sizeof dst->walls[k].force);
+    long at = 0;
+    for (int t = 0; t < nt; t++) {
+        const long hi = (long)((long)n * (t + 1) / nt); /* block t: [n t / nt, n (t + 1) / nt) */
+        memset(part, 0, sizeof part);
+        for (; at < n_rec && recs[(size_t)at * DEM_WALL_REC] < (double)hi; at++) {
+            const double *q = recs + (size_t)at * DEM_WALL_REC;
+            const int k = (int)q[1];
+            part[k][0] -= q[2], part[k][1] -= q[3], part[k][2] -= q[4];
+        }
+        for (int k = 0; k < dst->n_walls; k++)
+            for (int c = 0; c < 3; c++)
+                dst->walls[k].force[c] += part[k][c];
+    }
+}
+
+/* What each rank sends to rank 0 first: its counts. */
+enum { META_GRAINS, META_ACTIVE, META_FROZEN, META_WALL_RECS, META_WALL_GRAINS, META_GG, META_GW, META_N };
+
+/* The whole world on rank 0 as one process holds it (collective): every
+ * rank's owned grains in the global order (rank order), ids in tag order;
+ * the pairs whose first grain it owns, with their springs, active ones of
+ * every rank then the frozen-frozen ones (one process's list: rows in the
+ * global grain order, its frozen-frozen pairs moved behind, stably); the
+ * history table rebuilt at one process's size (or rank 0's own, when it
+ * still holds every grain: it is one process's); the wall forces summed
+ * from every rank's recorded contacts as one process sums them; the
+ * grain–grain and grain–wall contact counts (each pair counted by the
+ * owner of its first grain); the surface's largest overlap. dst: the view
+ * (rank 0; a world made from the same scene) or, collecting, w itself. */
+static int gather_into(dem_world *w, dem_world *dst, int collecting, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;
-    if (!d)
-        return cm_fail(err, CM_ERR_STATE, "dem_mpi_gather: the world is not distributed");
     const size_t rs = rec_size(w);
-    const int n = w->own_hi - w->own_lo;
-    int rc, ok = 1, total = 0;
-    int counts[2] = {n, w->contacts_gw}, sums[2] = {0, 0};
-    if ((rc = MPI_Reduce(counts, sums, 2, MPI_INT, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "reduce of the grain counts", w->step);
-    total = sums[0];
-    if (d->rank == 0) /* the view holds the same history layout (made from the same scene) */
-        ok = view && total <= view->g.cap && view->hist_stride == w->hist_stride &&
-             !grow(&d->rbuf, &d->rbuf_cap, (size_t)total * rs);
-    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs))
+    const int hs = w->hist_stride, pr = 2 + hs, own_lo = w->own_lo;
+    const int n = w->own_hi - own_lo;
+    int rc, ok = 1;
+    /* this rank's share */
+    long meta[META_N] = {n, 0, 0, 0, w->wall_rec_grains, w->contacts_gg, w->contacts_gw};
+    for (int p = 0; p < w->n_pairs; p++)
+        if (w->pi[p] >= own_lo)
+            meta[p < w->n_active_pairs ? META_ACTIVE : META_FROZEN]++;
+    if (w->wall_rec)
+        for (int t = 0; t < w->n_threads; t++)
+            meta[META_WALL_RECS] += w->tb[t].wall_rec_n;
+    const long np = meta[META_ACTIVE] + meta[META_FROZEN], nwr = meta[META_WALL_RECS];
+    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs + 1) || grow(&d->hsbuf, &d->hsbuf_cap, (size_t)np * pr + 1) ||
+        grow(&d->wsbuf, &d->wsbuf_cap, (size_t)nwr * DEM_WALL_REC + 1))
         ok = 0;
+    double smax = w->surf ? w->surf->tot.max_overlap : 0.0, smax_all = 0.0;
+    long *all = d->rank == 0 ? calloc((size_t)d->size * META_N, sizeof *all) : NULL;
+    if (d->rank == 0 && !all)
+        ok = 0;
+    if ((rc = MPI_Gather(meta, META_N, MPI_LONG, all, META_N, MPI_LONG, 0, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Reduce(&smax, &smax_all, 1, MPI_DOUBLE, MPI_MAX, 0, d->comm)) != MPI_SUCCESS) {
+        free(all);
+        return mpi_fail(err, rc, "gather of the grain and pair counts", w->step);
+    }
+    long tot[META_N] = {0};
+    if (d->rank == 0 && all) {
+        for (int r = 0; r < d->size; r++)
+            for (int m = 0; m < META_N; m++)
+                tot[m] += all[(size_t)r * META_N + m];
+        const long tp = tot[META_ACTIVE] + tot[META_FROZEN];
+        ok = ok && dst && tot[META_GRAINS] <= dst->g.cap && dst->hist_stride == hs &&
+             tot[META_GRAINS] * (long)rs <= INT_MAX && tp * pr <= INT_MAX &&
+             tot[META_WALL_RECS] * DEM_WALL_REC <= INT_MAX && tp < INT_MAX / 8 &&
+             !grow(&d->rbuf, &d->rbuf_cap, (size_t)tot[META_GRAINS] * rs + 1) &&
+             !grow(&d->hrbuf, &d->hrbuf_cap, (size_t)tp * pr + 1) &&
+             !grow(&d->wrbuf, &d->wrbuf_cap, (size_t)tot[META_WALL_RECS] * DEM_WALL_REC + 1) &&
+             dem_pairs_reserve(dst, (int)(tp ? tp : 1)) == CM_OK &&
+             (!collecting || !w->wall_rec || tot[META_WALL_RECS] <= (long)w->g.cap * w->wall_rec_nw);
+        if (ok && w->surf && !dst->surf) /* the view holds the surface springs too (a checkpoint's) */
+            ok = dem_surface_set(dst, w->surf->n_nodes, w->surf->x, w->surf->n_tris, w->surf->tri,
+                                 w->surf->material, err) == CM_OK;
+    }
     int okall = 0;
     MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
-    if (!okall)
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to gather %d grains on rank 0 (max_grains %d)", w->step,
-                       total, view ? view->g.cap : 0);
+    if (!okall) {
+        free(all);
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to gather %ld grains and %ld pairs on rank 0 "
+                       "(max_grains %d)", w->step, tot[META_GRAINS], tot[META_ACTIVE] + tot[META_FROZEN],
+                       dst ? dst->g.cap : 0);
+    }
+    /* pack: grains; pairs (slots counted from the first owned grain: a right
+     * ghost is the next rank's first grains), active then frozen; wall contacts */
     for (int k = 0; k < n; k++)
-        pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
-    int cnt = n * (int)rs;
-    if ((rc = gather_counts(d, cnt, d->rcount, d->rdispl, NULL)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the grain counts", w->step);
-    if ((rc = MPI_Gatherv(d->sbuf, cnt, MPI_DOUBLE, d->rbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
-        MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the grains", w->step);
+        pack_grain(w, own_lo + k, d->sbuf + (size_t)k * rs);
+    const double *hv = w->hist_val[w->hist_cur];
+    long at = 0;
+    for (int part = 0; part < 2; part++)
+        for (int p = part ? w->n_active_pairs : 0; p < (part ? w->n_pairs : w->n_active_pairs); p++) {
+            if (w->pi[p] < own_lo)
+                continue;
+            double *q = d->hsbuf + (size_t)at++ * pr;
+            q[0] = w->pi[p] - own_lo, q[1] = w->pj[p] - own_lo;
+            memcpy(q + 2, hv + (size_t)hs * p, (size_t)hs * sizeof *q);
+        }
+    at = 0;
+    for (int t = 0; t < w->n_threads && w->wall_rec; t++) {
+        const long lo = (long)w->wall_rec_grains * t / w->n_threads;
+        memcpy(d->wsbuf + (size_t)at * DEM_WALL_REC, w->wall_rec + (size_t)DEM_WALL_REC * w->wall_rec_nw * lo,
+               (size_t)w->tb[t].wall_rec_n * DEM_WALL_REC * sizeof *d->wsbuf);
+        at += w->tb[t].wall_rec_n;
+    }
+    int *gc = d->rcount, *gd = d->rdispl, *hc = d->hrcount, *hd = d->hrdispl, *wc = d->scount, *wd = d->sdispl;
+    if (d->rank == 0)
+        for (int r = 0, a = 0, b = 0, c = 0; r < d->size; r++) {
+            const long *m = all + (size_t)r * META_N;
+            gc[r] = (int)(m[META_GRAINS] * (long)rs), gd[r] = a, a += gc[r];
+            hc[r] = (int)((m[META_ACTIVE] + m[META_FROZEN]) * pr), hd[r] = b, b += hc[r];
+            wc[r] = (int)(m[META_WALL_RECS] * DEM_WALL_REC), wd[r] = c, c += wc[r];
+        }
+    if ((rc = MPI_Gatherv(d->sbuf, (int)(n * rs), MPI_DOUBLE, d->rbuf, gc, gd, MPI_DOUBLE, 0, d->comm)) !=
+            MPI_SUCCESS ||
+        (rc = MPI_Gatherv(d->hsbuf, (int)(np * pr), MPI_DOUBLE, d->hrbuf, hc, hd, MPI_DOUBLE, 0, d->comm)) !=
+            MPI_SUCCESS ||
+        (rc = MPI_Gatherv(d->wsbuf, (int)(nwr * DEM_WALL_REC), MPI_DOUBLE, d->wrbuf, wc, wd, MPI_DOUBLE, 0,
+                          d->comm)) != MPI_SUCCESS) {
+        free(all);
+        return mpi_fail(err, rc, "gather of the grains, pairs and wall contacts", w->step);
+    }
     if (d->rank != 0)
         return CM_OK;
-    /* rank order is the global order: the slabs follow each other along x */
-    view->n_walls = w->n_walls;
-    memcpy(view->walls, w->walls, sizeof w->walls);
-    view->wall_stride = w->wall_stride;
-    view->g.n = total;
-    view->n_frozen = 0;
+    /* rank 0: the grains, rank order being the global order (the view
+     * takes the walls first: the wall springs' layout) */
+    dst->n_walls = w->n_walls;
+    memcpy(dst->walls, w->walls, sizeof w->walls);
+    dst->wall_stride = w->wall_stride;
+    const int total = (int)tot[META_GRAINS];
+    dem_grains *g = &dst->g;
+    g->n = total;
+    dst->n_frozen = 0;
     for (int k = 0; k < total; k++) {
-        unpack_grain(view, k, d->rbuf + (size_t)k * rs);
-        view->n_frozen += view->g.frozen[k];
+        unpack_grain(dst, k, d->rbuf + (size_t)k * rs);
+        dst->n_frozen += g->frozen[k];
         d->order[k] = k;
     }
-    g_sort_tags = view->g.tag;
+    g_sort_tags = g->tag;
     qsort(d->order, (size_t)total, sizeof *d->order, slot_by_tag);
     for (int id = 0; id < total; id++)
-        view->g.id[d->order[id]] = id, view->g.slot_of[id] = d->order[id];
-    view->time = w->time, view->step = w->step;
-    view->r_min = w->r_min, view->r_max = w->r_max, view->skin = w->skin;
-    view->contacts_gw = sums[1];
-    view->prepared = 1;
-    view->def.reorder_every = 0; /* keep the gathered order */
-    return dem_neighbour_rebuild(view, err);
+        g->id[d->order[id]] = id, g->slot_of[id] = d->order[id];
+    /* the pairs: every rank's active ones, then every rank's frozen ones */
+    const int cur = w->hist_cur;
+    dst->hist_cur = cur;
+    double *dv = dst->hist_val[cur];
+    int np_all = 0;
+    for (int part = 0; part < 2; part++) {
+        long base = 0, off = 0; /* the rank's first grain, its first pair record */
+        for (int r = 0; r < d->size; r++) {
+            const long *m = all + (size_t)r * META_N;
+            const long lo = off + (part ? m[META_ACTIVE] : 0), hi = lo + m[part ? META_FROZEN : META_ACTIVE];
+            for (long k = lo; k < hi; k++) {
+                const double *q = d->hrbuf + (size_t)k * pr;
+                dst->pi[np_all] = (int)(base + (long)q[0]), dst->pj[np_all] = (int)(base + (long)q[1]);
+                memcpy(dv + (size_t)hs * np_all, q + 2, (size_t)hs * sizeof *dv);
+                np_all++;
+            }
+            base += m[META_GRAINS];
+            off += m[META_ACTIVE] + m[META_FROZEN];
+        }
+    }
+    dst->n_pairs = np_all;
+    dst->n_active_pairs = (int)tot[META_ACTIVE];
+    dem_hist_orient(dst);
+    /* the history table: one process's (keys entered in list order) */
+    dem_hash *h = &dst->hist[cur];
+    if (d->distributed) {
+        if (hash_exact(h, d->vcap[cur]) || (collecting && hash_exact(&dst->hist[1 - cur], d->vcap[1 - cur]))) {
+            free(all);
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
+        }
+        for (int p = 0; p < np_all; p++)
+            h->row[dem_hash_insert(h, dem_pair_key(g->tag[dst->pi[p]], g->tag[dst->pj[p]]))] = p;
+    } else if (dst != w) { /* rank 0 holds every grain: its table is one process's */
+        const dem_hash *src = &w->hist[cur];
+        if (hash_exact(h, src->cap)) {
+            free(all);
+            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
+        }
+        if (src->cap > 0) {
+            memcpy(h->key, src->key, (size_t)src->cap * sizeof *h->key);
+            memcpy(h->row, src->row, (size_t)src->cap * sizeof *h->row);
+        }
+        h->count = src->count;
+    }
+    /* the wall contacts in the global order: places from each rank's first grain */
+    long wbase = 0, wat = 0;
+    for (int r = 0; r < d->size; r++) {
+        const long *m = all + (size_t)r * META_N;
+        for (long k = 0; k < m[META_WALL_RECS]; k++, wat++)
+            d->wrbuf[(size_t)wat * DEM_WALL_REC] += (double)wbase;
+        wbase += m[META_WALL_GRAINS];
+    }
+    if (d->distributed) /* otherwise rank 0 holds every grain: its wall forces are one process's */
+        wall_forces_replay(dst, w->n_threads, d->wrbuf, tot[META_WALL_RECS], tot[META_WALL_GRAINS]);
+    if (collecting && w->wall_rec) { /* rank 0 holds every grain's wall contacts now */
+        memcpy(w->wall_rec, d->wrbuf, (size_t)tot[META_WALL_RECS] * DEM_WALL_REC * sizeof *w->wall_rec);
+        for (int t = 0; t < w->n_threads; t++)
+            w->tb[t].wall_rec_n = t == 0 ? (int)tot[META_WALL_RECS] : 0;
+        w->wall_rec_grains = (int)tot[META_WALL_GRAINS];
+    }
+    dst->contacts_gg = (int)tot[META_GG], dst->contacts_gw = (int)tot[META_GW];
+    if (dst->surf) { /* the series' surface columns: rank 0 summed the contacts, the largest overlap over the ranks */
+        dst->surf->tot.contacts = w->surf->tot.contacts;
+        dst->surf->tot.max_overlap = smax_all;
+        if (dst != w) /* a slot of the view (the worst contact's grain is not named) */
+            dst->surf->tot.worst_grain = 0, dst->surf->tot.worst_tri = 0;
+    }
+    free(all);
+    if (dst == w)
+        return CM_OK;
+    dst->time = w->time, dst->step = w->step, dst->next_tag = w->next_tag;
+    dst->r_min = w->r_min, dst->r_max = w->r_max, dst->skin = w->skin;
+    dst->need_rebuild = w->need_rebuild, dst->rebuild_count = w->rebuild_count;
+    dst->prof.rebuilds = w->prof.rebuilds;
+    dst->n_shaped = 0;
+    dst->prepared = 1;
+    dst->plan.valid = 0;
+    return CM_OK;
+}
+
+int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
+{
+    if (!w->dist_ctx)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_gather: the world is not distributed");
+    return gather_into(w, view, 0, err);
 }
 
 /* Rank of slot `tag` in d->order (sorted by tag), or -1. */
@@ -812,78 +1071,81 @@ static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n
     return CM_OK;
 }
 
+/* Rank 0 before spreading a world whose list a removal emptied (one
+ * process's state after dem_window_update): its springs, waiting in the
+ * history table, as a list again (install_springs), so that dist_rebuild
+ * sends them with their grains. */
+static int springs_from_table(dem_world *w, dist_ctx *d, cm_error *err)
+{
+    const dem_hash *h = &w->hist[w->hist_cur];
+    const double *hv = w->hist_val[w->hist_cur];
+    const unsigned char *ori = w->hist_ori[w->hist_cur];
+    const int sr = spring_rec(w);
+    if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * sr + 1))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d springs", w->step, h->count);
+    long m = 0;
+    for (int s = 0; s < h->cap; s++) {
+        if (h->key[s] == DEM_HASH_EMPTY || h->row[s] < 0)
+            continue;
+        const int r = h->row[s];
+        spring_record(w, (double)(uint32_t)(h->key[s] >> 32), (double)(uint32_t)(h->key[s] & 0xffffffffu),
+                      ori[r] ? 1.0 : -1.0 /* to lower tag first */, hv + (size_t)w->hist_stride * r,
+                      d->hrbuf + (size_t)m++ * sr);
+    }
+    return install_springs(w, d, d->hrbuf, m, err);
+}
+
 int dem_mpi_collect(dem_world *w, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;
     if (!d || !w->dist)
         return cm_fail(err, CM_ERR_STATE, "dem_mpi_collect: the world is not distributed");
+    /* rank 0 becomes the one process: its grains, list, springs, history
+     * table, wall contacts and counts are one process's */
+    int rc = gather_into(w, d->rank == 0 ? w : NULL, 1, err);
+    if (rc)
+        return rc;
     dem_grains *g = &w->g;
-    const size_t rs = rec_size(w);
-    const int n = w->own_hi - w->own_lo, np = w->n_pairs;
-    int rc, ok = 1;
-    const int sr = spring_rec(w);
-    if (grow(&d->sbuf, &d->sbuf_cap, (size_t)n * rs + 1) || grow(&d->hsbuf, &d->hsbuf_cap, (size_t)np * sr + 1))
-        ok = 0;
-    long mine[2] = {n, np}, tot[2] = {0, 0};
-    if ((rc = MPI_Reduce(mine, tot, 2, MPI_LONG, MPI_SUM, 0, d->comm)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "reduce of the grain counts", w->step);
-    if (d->rank == 0)
-        ok = ok && tot[0] <= g->cap && tot[0] * (long)rs <= INT_MAX && tot[1] * sr <= INT_MAX &&
-             !grow(&d->rbuf, &d->rbuf_cap, (size_t)tot[0] * rs + 1) &&
-             !grow(&d->hrbuf, &d->hrbuf_cap, (size_t)tot[1] * sr + 1);
-    int okall = 0;
-    MPI_Allreduce(&ok, &okall, 1, MPI_INT, MPI_MIN, d->comm);
-    if (!okall)
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to collect %ld grains and %ld springs on rank 0 "
-                       "(max_grains %d)", w->step, tot[0], tot[1], g->cap);
-    for (int k = 0; k < n; k++)
-        pack_grain(w, w->own_lo + k, d->sbuf + (size_t)k * rs);
-    const double *hv = w->hist_val[w->hist_cur];
-    for (int p = 0; p < np; p++) { /* lower tag first, as migrating springs */
-        int a = w->pi[p], b = w->pj[p];
-        const int lower = g->tag[a] < g->tag[b];
-        spring_record(w, lower ? g->tag[a] : g->tag[b], lower ? g->tag[b] : g->tag[a], lower ? 1.0 : -1.0,
-                      hv + (size_t)w->hist_stride * p, d->hsbuf + (size_t)p * sr);
-    }
-    int cnt[2] = {n * (int)rs, np * sr};
-    int *gc = d->rcount, *gd = d->rdispl, *hc = d->hrcount, *hd = d->hrdispl;
-    if ((rc = gather_counts(d, cnt[0], gc, gd, NULL)) != MPI_SUCCESS ||
-        (rc = gather_counts(d, cnt[1], hc, hd, NULL)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the grain counts", w->step);
-    if ((rc = MPI_Gatherv(d->sbuf, cnt[0], MPI_DOUBLE, d->rbuf, gc, gd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS ||
-        (rc = MPI_Gatherv(d->hsbuf, cnt[1], MPI_DOUBLE, d->hrbuf, hc, hd, MPI_DOUBLE, 0, d->comm)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the grains and springs", w->step);
     d->collects++;
     d->distributed = 0; /* the next rebuild spreads rank 0's grains again */
-    w->n_active_pairs = 0;
     w->plan.valid = 0;
+    w->n_ghost_rows = 0;
+    w->n_cross_pairs = 0;
     if (d->rank != 0) { /* nothing left here: grains and springs come back at the next rebuild */
         g->n = 0;
-        w->n_pairs = 0;
+        w->n_pairs = w->n_active_pairs = 0;
         w->own_lo = w->own_hi = 0;
         w->n_frozen = 0;
         w->need_rebuild = 1;
+        w->contacts_gg = w->contacts_gw = 0;
+        w->wall_rec_grains = 0;
+        for (int t = 0; t < w->n_threads; t++)
+            w->tb[t].wall_rec_n = 0;
+        if (w->surf)
+            w->surf->tot.max_overlap = 0.0;
         if (dem_hash_reset(&w->hist[w->hist_cur], 0))
             return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory", w->step);
         return CM_OK;
     }
-    /* rank 0: the whole world in the global order (rank order), as one
-     * process holds it: ids in tag order, the springs by tag pair */
-    g->n = (int)tot[0];
-    w->n_frozen = 0;
-    for (int k = 0; k < g->n; k++) {
-        unpack_grain(w, k, d->rbuf + (size_t)k * rs);
-        w->n_frozen += g->frozen[k];
-    }
-    if ((rc = install_springs(w, d, d->hrbuf, tot[1], err)))
-        return rc;
-    for (int id = 0; id < g->n; id++) /* d->order: slots by tag */
-        g->id[d->order[id]] = id, g->slot_of[id] = d->order[id];
     w->own_lo = 0, w->own_hi = g->n;
     /* one process is between two steps here: its list current (no rebuild
      * pending); what changes the world must ask for one (dem_mpi_rejoin checks) */
     w->need_rebuild = 0;
     w->dist = NULL; /* rank 0 steps alone until dem_mpi_rejoin */
+    return CM_OK;
+}
+
+/* Room for the wall contacts of every grain of a world with w->n_walls walls. */
+static int wall_rec_alloc(dem_world *w, dist_ctx *d)
+{
+    if (w->n_walls <= w->wall_rec_nw && d->wall_rec)
+        return CM_OK;
+    const size_t n = (size_t)w->g.cap * (size_t)(w->n_walls ? w->n_walls : 1) * DEM_WALL_REC;
+    double *b = realloc(d->wall_rec, n * sizeof *b);
+    if (!b)
+        return CM_ERR_NOMEM;
+    d->wall_rec = w->wall_rec = b;
+    w->wall_rec_nw = w->n_walls;
     return CM_OK;
 }
 
@@ -897,27 +1159,8 @@ int dem_mpi_rejoin(dem_world *w, cm_error *err)
     if (d->rank == 0) {
         w->dist = &dist_ops;
         w->own_lo = 0, w->own_hi = w->g.n;
-        /* a removal emptied the list, its springs wait in the hash: a list
-         * of them again, for the ranks the grains go to */
-        if (w->n_pairs == 0 && w->hist[w->hist_cur].count > 0) {
-            const dem_hash *h = &w->hist[w->hist_cur];
-            const double *hv = w->hist_val[w->hist_cur];
-            const unsigned char *ori = w->hist_ori[w->hist_cur];
-            const int sr = spring_rec(w);
-            if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * sr + 1))
-                return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d springs", w->step, h->count);
-            long m = 0;
-            for (int s = 0; s < h->cap; s++) {
-                if (h->key[s] == DEM_HASH_EMPTY || h->row[s] < 0)
-                    continue;
-                const int r = h->row[s];
-                spring_record(w, (double)(uint32_t)(h->key[s] >> 32), (double)(uint32_t)(h->key[s] & 0xffffffffu),
-                              ori[r] ? 1.0 : -1.0 /* to lower tag first */, hv + (size_t)w->hist_stride * r,
-                              d->hrbuf + (size_t)m++ * sr);
-            }
-            if ((rc = install_springs(w, d, d->hrbuf, m, err)))
-                return rc;
-        }
+        /* rank 0 was one process since the collect: its tables' sizes are one process's */
+        d->vcap[0] = w->hist[0].cap, d->vcap[1] = w->hist[1].cap;
         hdr[0] = w->need_rebuild && w->prepared, hdr[1] = w->r_min, hdr[2] = w->r_max, hdr[3] = w->skin;
         hdr[4] = w->n_walls, hdr[5] = w->next_tag;
     }
@@ -930,6 +1173,8 @@ int dem_mpi_rejoin(dem_world *w, cm_error *err)
     w->r_min = hdr[1], w->r_max = hdr[2], w->skin = hdr[3], w->n_walls = (int)hdr[4], w->next_tag = (int)hdr[5];
     w->need_rebuild = 1;
     w->walls_near_valid = 0;
+    if (wall_rec_alloc(w, d))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the wall contacts", w->step);
     return CM_OK;
 }
 

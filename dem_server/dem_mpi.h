@@ -59,17 +59,25 @@ void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s);
  * every rank (collective). */
 int dem_mpi_hash(dem_world *w, uint64_t *hash, cm_error *err);
 
-/* The whole world on rank 0, for its outputs (collective): every rank's
- * owned grains into `view` (rank 0's; a world made with the same definition
- * and materials, NULL elsewhere) in the global order, ids in tag order as one
- * process numbers them, walls, clock and wall-contact count copied, and a
- * neighbour list of its own (no re-sort), so that dem_output_frame writes
- * what one process writes for the same state. */
+/* The whole world on rank 0 as one process holds it, for its outputs
+ * (collective): into `view` (rank 0's; a world made with the same
+ * definition and materials, NULL elsewhere; the surface is installed in it
+ * when the world has one) every rank's owned grains in the global order,
+ * ids in tag order as one process numbers them; one process's pair list
+ * (each rank's pairs whose first grain it owns, active ones of every rank
+ * then the frozen-frozen ones) with its springs and its history table at
+ * one process's size; the wall forces summed from every rank's wall
+ * contacts in one process's order; the contact counts (a pair counted by
+ * the owner of its first grain); walls, clock and counters copied; the
+ * surface's contact count and largest overlap. dem_output_frame,
+ * dem_output_series and dem_checkpoint_write then write what one process
+ * writes for the same state. */
 int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err);
 
-/* The terrain window over ranks (collective): collect gathers every rank's
- * grains and springs on rank 0, in the global order as one process holds
- * them, and leaves the others empty; rank 0 then changes its world as one
+/* The terrain window over ranks (collective): collect gathers the world on
+ * rank 0 as dem_mpi_gather does, into rank 0's own world, which is then
+ * exactly one process's (grains, list, springs, history table, wall
+ * contacts, counts), and leaves the others empty; rank 0 then changes its world as one
  * process (dem_window_update: the removal, the appended stretch and its
  * seam relaxation are one process's, so every rank agrees on them); rejoin
  * spreads it again at the next neighbour rebuild (rank 0's walls, radii and

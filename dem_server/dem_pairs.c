@@ -641,6 +641,19 @@ static int stage_pairs_shaped(dem_world *w)
     return contacts;
 }
 
+int dem_pairs_contacts(const dem_world *w, int p0, int p1)
+{
+    const dem_grains *g = &w->g;
+    int contacts = 0;
+    for (int p = p0; p < p1; p++) { /* the test of candidate(), the same operations */
+        const int i = w->pi[p], j = w->pj[p];
+        const double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+        const double d2 = ex * ex + ey * ey + ez * ez, rs = g->r[i] + g->r[j];
+        contacts += !((d2 >= rs * rs) | (d2 == 0.0));
+    }
+    return contacts;
+}
+
 int dem_stage_pairs(dem_world *w)
 {
     if (w->n_shaped > 0)

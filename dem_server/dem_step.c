@@ -45,9 +45,11 @@ static void gravity_range(dem_grains *g, int lo, int hi, const double grav[3])
 
 /* Walls for grain slots [lo, hi), added after gravity; wall forces into wf.
  * Inlined twice with `shaped` constant: the sphere-only instance is the
- * original loop, without a shape test. */
+ * original loop, without a shape test. rec (distributed, spheres): each
+ * contact's force on its grain recorded (dem_world.wall_rec), *nrec of
+ * them, the grain's place counted from slot g0. */
 static inline __attribute__((always_inline)) int walls_range(dem_world *w, int lo, int hi, double (*wf)[3],
-                                                             const int shaped)
+                                                             const int shaped, double *rec, int g0, int *nrec)
 {
     dem_grains *g = &w->g;
     const int nw = w->n_walls, hs = w->hist_stride;
@@ -108,6 +110,10 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
             g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
             wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
+            if (rec) {
+                double *q = rec + (size_t)DEM_WALL_REC * (*nrec)++;
+                q[0] = i - g0, q[1] = k, q[2] = F.x, q[3] = F.y, q[4] = F.z;
+            }
         }
         g->wall_mask[i] = mask;
     }
@@ -146,8 +152,15 @@ int dem_step_surface(dem_world *w, cm_error *err)
         int lo = g0 + (int)((long)n * tid / nt), hi = g0 + (int)((long)n * (tid + 1) / nt);
         double(*wf)[3] = w->tb[tid].wall_f;
         gravity_range(g, lo, hi, w->def.gravity);
-        contacts += shaped ? walls_range(w, lo, hi, wf, 1) : walls_range(w, lo, hi, wf, 0);
+        /* distributed: the contacts recorded for the wall forces over ranks */
+        double *rec = w->wall_rec && w->wall_rec_nw >= nw && !shaped
+                          ? w->wall_rec + (size_t)DEM_WALL_REC * w->wall_rec_nw * (lo - g0)
+                          : NULL;
+        w->tb[tid].wall_rec_n = 0;
+        contacts += shaped ? walls_range(w, lo, hi, wf, 1, NULL, g0, NULL)
+                           : walls_range(w, lo, hi, wf, 0, rec, g0, &w->tb[tid].wall_rec_n);
     }
+    w->wall_rec_grains = n;
     for (int k = 0; k < nw; k++) {
         memset(w->walls[k].force, 0, sizeof w->walls[k].force);
         for (int t = 0; t < nt; t++)
@@ -332,6 +345,8 @@ int dem_step_grains(dem_world *w, cm_error *err)
         t0 = t;
     }
     w->contacts_gg = dem_stage_pairs(w);
+    if (w->dist) /* a left ghost's pairs are counted by its owner (the ranks' counts add up to one process's) */
+        w->contacts_gg -= dem_pairs_contacts(w, 0, w->n_ghost_rows);
     double t_pairs = cm_now();
     w->prof.pairs += t_pairs - t0;
     t0 = t_pairs;

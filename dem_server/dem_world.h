@@ -70,6 +70,9 @@ typedef struct dem_grains {
  * relative to j: a swap of i and j negates all of them. */
 enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
 
+/* doubles per recorded grain–wall contact (dem_world.wall_rec) */
+#define DEM_WALL_REC 5
+
 /* doubles per stored pair: F on i (3), torque on i (3), torque on j (3) */
 #define DEM_PAIR_F 9
 
@@ -105,6 +108,7 @@ typedef struct dem_thread_buf {
     double *f; /* 6 * cap: fx fy fz tx ty tz blocks */
     double wall_f[DEM_MAX_WALLS][3];
     int contacts;
+    int wall_rec_n;    /* distributed: wall contacts this thread recorded in dem_world.wall_rec */
     double pad[8];     /* keeps two threads' wall_f apart by a cache line (no false sharing) */
 } dem_thread_buf;
 
@@ -196,6 +200,20 @@ struct dem_world {
     const dem_hash *hist_extra;
     const double *hist_extra_val;
     long n_cross_pairs; /* pairs owned–ghost in the last list (distributed) */
+    /* Active pairs whose first grain is a left ghost: a prefix of the list
+     * (rows in slot order, the frozen-frozen pairs moved behind). Their
+     * owner counts their contacts (contacts_gg), so that the ranks' counts
+     * add up to one process's. */
+    int n_ghost_rows;
+    /* The grain–wall contacts of the last surface stage (distributed; NULL
+     * otherwise), so that the wall forces can be summed over the ranks in
+     * one process's order (dem_mpi.c): thread t records from
+     * DEM_WALL_REC * wall_rec_nw * (its block's first grain - the stage's
+     * first) on, per contact the grain's place among the stage's
+     * wall_rec_grains grains, the wall, the force on the grain
+     * (tb[t].wall_rec_n records). Owned by the distribution. */
+    double *wall_rec;
+    int wall_rec_nw, wall_rec_grains;
 
     long step;
     double time;
@@ -252,6 +270,8 @@ int dem_check_dt(dem_world *w, cm_error *err);
  * (forces and torques added into the grains; returns the contacts). */
 int dem_pair_plan_build(dem_world *w, cm_error *err);
 int dem_stage_pairs(dem_world *w);
+/* Sphere pairs [p0, p1) of the list in contact, by the stage's own test. */
+int dem_pairs_contacts(const dem_world *w, int p0, int p1);
 /* dem_world.c: moves grain data so that slot k holds the grain previously in
  * order[k] (the re-sort at a rebuild). */
 void dem_grains_permute(dem_world *w, const int *order);

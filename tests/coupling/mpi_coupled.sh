@@ -6,10 +6,10 @@
 # plain dem_server and by `./run --ranks 2` and `--ranks 3` (oversubscribed
 # next to fem_server on two cores). Every run must end in the same
 # dem_world_hash and fem_state_hash and write the same result files:
-# traction.csv, summary.json, fem_series.csv and the run records byte for
-# byte, every dataset of dem_grains.h5 (the ranks' grains gathered on rank
-# 0), wheel.h5 and fem.h5 byte for byte. dem_series.csv is left out: a
-# distributed run writes its initial row only (dem_server/README.md).
+# traction.csv, summary.json, fem_series.csv, dem_series.csv (energies
+# summed over the grains gathered on rank 0, the ranks' contact counts
+# added) and the run records byte for byte, every dataset of dem_grains.h5
+# (the ranks' grains gathered on rank 0), wheel.h5 and fem.h5 byte for byte.
 # So that the test could fail, the distributed runs must have moved grains
 # between ranks, found surface contacts on more than one rank, and shifted
 # the window (a removal and an appended stretch) while distributed.
@@ -48,7 +48,7 @@ for n in 2 3; do
   shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/ranks$n.log")
   grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/ranks$n.log" &&
     [ "${shifts:-0}" -gt 0 ] || { echo "$n ranks: the window did not shift while distributed"; exit 1; }
-  for f in traction.csv summary.json fem_series.csv dem_run.json fem_run.json; do
+  for f in traction.csv summary.json fem_series.csv dem_series.csv dem_run.json fem_run.json; do
     cmp "$work/one/$f" "$work/ranks$n/$f" || { echo "$n ranks: $f differs"; exit 1; }
   done
   "${DEMFEM_PYTHON:-/usr/bin/python3}" "$src/tests/coupling/same_h5.py" "$work/one" "$work/ranks$n" ||

@@ -1,7 +1,8 @@
-"""same_h5.py DIR_A DIR_B: every dataset of DIR_A's and DIR_B's dem_grains.h5,
-wheel.h5 and fem.h5 has the same names, shapes and bytes (the MPI tests:
-a run on several DEM ranks writes what one process writes). Exit 1 on the
-first difference."""
+"""same_h5.py DIR_A DIR_B [FILE...]: every dataset of DIR_A's and DIR_B's
+dem_grains.h5, wheel.h5 and fem.h5 (or the FILEs given, paths inside the
+folders, e.g. checkpoint/dem.h5) has the same names, shapes and bytes (the
+MPI tests: a run on several DEM ranks writes what one process writes). Exit 1
+on the first difference."""
 import sys
 
 import h5py
@@ -17,7 +18,7 @@ def datasets(group, prefix=""):
     return out
 
 
-for name in ("dem_grains.h5", "wheel.h5", "fem.h5"):
+for name in sys.argv[3:] or ("dem_grains.h5", "wheel.h5", "fem.h5"):
     a = h5py.File(f"{sys.argv[1]}/{name}", "r")
     b = h5py.File(f"{sys.argv[2]}/{name}", "r")
     da, db = datasets(a), datasets(b)

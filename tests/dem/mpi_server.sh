@@ -2,8 +2,10 @@
 # dem_server itself over MPI: a DEM-only scene (tests/dem/scenes/mpi_drop.cfg)
 # run by one plain process and by mpirun with 2 and 3 ranks (oversubscribed)
 # must log the same final state hash (dem_mpi_hash gathers the whole world
-# in tag order) and write the same grain frames (every dataset of every
-# frame byte for byte: the ranks' grains gathered on rank 0), and the
+# in tag order), write the same grain frames (every dataset of every
+# frame byte for byte: the ranks' grains gathered on rank 0) and the same
+# dem_series.csv byte for byte (more than its initial row: energies summed
+# over the gathered grains, the ranks' contact counts added), and the
 # distributed runs must have moved grains between ranks.
 # Usage: mpi_server.sh DEM_SERVER MPIEXEC
 set -uo pipefail
@@ -31,6 +33,10 @@ for n in 2 3; do
   moved=$(sed -n 's/.*rank [0-9]* of [0-9]*:.*, \([0-9]*\) migrated;.*/\1/p' "$work/ranks$n.log" |
           awk '{s += $1} END {print s + 0}')
   [ "$moved" -gt 0 ] || { echo "$n ranks: no grain migrated between ranks"; exit 1; }
+  rows=$(wc -l < "$work/one/dem_series.csv")
+  [ "$rows" -gt 3 ] || { echo "one process: $rows lines in dem_series.csv"; exit 1; }
+  cmp "$work/one/dem_series.csv" "$work/ranks$n/dem_series.csv" || { echo "$n ranks: dem_series.csv differs"; exit 1; }
+  echo "dem_series.csv: $rows lines identical"
   "${DEMFEM_PYTHON:-/usr/bin/python3}" - "$work/one/dem_grains.h5" "$work/ranks$n/dem_grains.h5" <<'PY' || { echo "$n ranks: frames differ"; exit 1; }
 import sys
 import h5py

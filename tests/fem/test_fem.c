@@ -1336,6 +1336,73 @@ static int floor_tire_balance(void)
     return 0;
 }
 
+/* The floor's influence method (K factorized once, the held nodes through
+ * the dense system of their influence matrix) against the reference that
+ * holds the nodes in K and refactorizes every pass, on the small tire with
+ * both elements: at a fixed height the same active set, reactions and
+ * displacement field to 1e-9 relative; with the load searched (tet4) the
+ * same height to the search's tolerance (1e-6 of the load), with one
+ * factorization instead of one per pass. */
+static int floor_influence_matches_refactor(void)
+{
+    for (int el = 0; el < 2; el++) {
+        fem_floor_result r[2], rh[2];
+        double *u[2] = {NULL, NULL};
+        int nd = 0;
+        for (int ref = 0; ref < 2; ref++) {
+            fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
+            c.element = el ? FEM_ELEMENT_TET10 : FEM_ELEMENT_TET4;
+            c.gravity[2] = 0.0;
+            c.floor = true;
+            c.floor_set = FEM_SET_CONTACT;
+            c.floor_load = 400.0;
+            c.floor_refactor = ref;
+            fem_model *m;
+            cm_error err = {0};
+            if (ref == 0 || el == 0) { /* the reference's search on tet10 takes a minute: tet4 only */
+                ENSURE(fem_create(&c, &m, &err) == CM_OK);
+                ENSURE_MSG(fem_floor_static(m, &r[ref], &err) == CM_OK, "%s", err.msg);
+                fem_destroy(&m);
+            } else {
+                r[1] = r[0];
+                r[1].factorizations = r[1].solves, r[1].columns = 0;
+            }
+            /* at the height the influence method found, fixed */
+            c.floor_load = 0.0;
+            c.floor_height = r[0].height;
+            ENSURE(fem_create(&c, &m, &err) == CM_OK);
+            ENSURE_MSG(fem_floor_static(m, &rh[ref], &err) == CM_OK, "%s", err.msg);
+            nd = m->s->n_dof;
+            u[ref] = malloc((size_t)nd * sizeof *u[ref]);
+            ENSURE(u[ref]);
+            memcpy(u[ref], m->s->u, (size_t)nd * sizeof *u[ref]);
+            fem_destroy(&m);
+        }
+        double du = 0.0, umax = 0.0;
+        for (int d = 0; d < nd; d++) {
+            du = fmax(du, fabs(u[0][d] - u[1][d]));
+            umax = fmax(umax, fabs(u[1][d]));
+        }
+        printf("  %s, 400 N: influence %.9f mm (%d nodes, %d passes, %d factorization, %d columns), reference "
+               "%.9f mm (%d nodes, %d factorizations); at a fixed height: reaction %.9g / %.9g N, max |du| / max |u| "
+               "= %.2g\n", el ? "tet10" : "tet4", 1e3 * r[0].deflection, r[0].contact_nodes, r[0].solves,
+               r[0].factorizations, r[0].columns, 1e3 * r[1].deflection, r[1].contact_nodes, r[1].factorizations,
+               rh[0].reaction, rh[1].reaction, du / umax);
+        free(u[0]);
+        free(u[1]);
+        ENSURE(r[0].factorizations == 1 && r[1].factorizations == r[1].solves && r[1].columns == 0);
+        ENSURE(rh[0].factorizations == 1 && rh[1].factorizations == rh[1].solves && rh[1].solves > 1);
+        ENSURE(r[0].columns >= r[0].contact_nodes && r[0].contact_nodes >= 3);
+        ENSURE(rh[0].contact_nodes == rh[1].contact_nodes);
+        ENSURE_REL(rh[0].reaction, rh[1].reaction, 1e-9);
+        ENSURE_NEAR(rh[0].max_below, rh[1].max_below, 1e-9 * umax);
+        ENSURE(du <= 1e-9 * umax);
+        ENSURE_REL(r[0].deflection, r[1].deflection, 2e-6);
+        ENSURE(r[0].contact_nodes == r[1].contact_nodes);
+    }
+    return 0;
+}
+
 /* fem.floor's keys: read from a scene, exactly one of height and load,
  * the set named, a misspelt key refused by the strict check. */
 static int floor_keys_checked(void)
@@ -1755,6 +1822,7 @@ int main(int argc, char **argv)
         {"interface_mass_scaling", interface_mass_scaling},
         {"floor_block_closed_form", floor_block_closed_form},
         {"floor_tire_balance", floor_tire_balance},
+        {"floor_influence_matches_refactor", floor_influence_matches_refactor},
         {"floor_keys_checked", floor_keys_checked},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},

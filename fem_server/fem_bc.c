@@ -330,8 +330,8 @@ static int floor_columns(floor_ctx *c, int n_act, cm_error *err)
         c->G = g;
         c->cap_col = cap;
     }
-    /* at most ~32 MB per right-hand-side block */
-    int batch = (int)(4000000 / nd);
+    /* at most ~256 MB per right-hand-side block */
+    int batch = (int)(32000000 / nd);
     batch = batch < 1 ? 1 : batch > 32 ? 32 : batch;
     double *B = calloc(nd * (size_t)batch, sizeof *B), *X = malloc(nd * (size_t)batch * sizeof *X);
     int32_t *nodes = malloc((size_t)batch * sizeof *nodes);

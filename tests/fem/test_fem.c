@@ -889,6 +889,60 @@ static fem_config small_tire_config(fem_integrator integ)
     return c;
 }
 
+/* Integer resolutions mesh the same tire (uniform refinement): the lug
+ * tops' extent across the tread (the centre groove's edge and the
+ * shoulder) and their share of the circumference are the same at 1 and 2,
+ * so that a quantity converges under refinement instead of following a
+ * changing geometry (the groove was two cells at every resolution: a
+ * quarter of the crown at 1, an eighth at 2, half at 0.5). */
+static int tire_mesher_same_tire(void)
+{
+    double ymin[2], ymax[2], share[2];
+    for (int k = 0; k < 2; k++) {
+        fem_tire_def d = fem_tire_def_default();
+        d.resolution = k + 1.0;
+        fem_mesh m;
+        cm_error err = {0};
+        ENSURE(fem_mesh_tire(&d, &m, &err) == CM_OK);
+        /* lug-top nodes: on the outer radius; ymin: the groove's edge (smallest |y|), ymax: the widest */
+        ymin[k] = INFINITY, ymax[k] = 0.0;
+        for (int n = 0; n < m.n_nodes; n++) {
+            const double *x = &m.x[3 * n];
+            if (fabs(sqrt(x[0] * x[0] + x[2] * x[2]) - d.outer_radius) < 1e-9) {
+                ymin[k] = fmin(ymin[k], fabs(x[1]));
+                ymax[k] = fmax(ymax[k], fabs(x[1]));
+            }
+        }
+        /* share of the crown line y = +ymin.. covered by lug tops: the outer-radius faces' area over the
+         * band's (the chords' cosine cancels between the two: both on the same polygon) */
+        double a_top = 0.0;
+        for (int f = 0; f < m.n_faces; f++) {
+            const int32_t *t = &m.faces[3 * f];
+            int on = 1;
+            for (int q = 0; q < 3; q++) {
+                const double *x = &m.x[3 * t[q]];
+                on &= fabs(sqrt(x[0] * x[0] + x[2] * x[2]) - d.outer_radius) < 1e-9;
+            }
+            if (on) {
+                const double *a = &m.x[3 * t[0]], *b = &m.x[3 * t[1]], *c = &m.x[3 * t[2]];
+                double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+                double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                e1[0] * e2[1] - e1[1] * e2[0]};
+                a_top += 0.5 * sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
+            }
+        }
+        share[k] = a_top / (2.0 * M_PI * d.outer_radius * 2.0 * (ymax[k] - ymin[k]));
+        printf("  tire res %d: lug tops from |y| = %.6f to %.6f m, %.4f of that band\n", k + 1, ymin[k], ymax[k],
+               share[k]);
+        fem_mesh_free(&m);
+    }
+    ENSURE_NEAR(ymin[1], ymin[0], 1e-12);
+    ENSURE_NEAR(ymax[1], ymax[0], 1e-12);
+    ENSURE_REL(share[1], share[0], 2e-3); /* the polygon's chords: 1 - cos(pi / n_theta) */
+    ENSURE(share[0] > 0.49 && share[0] < 0.501); /* lug_fraction 0.5 */
+    return 0;
+}
+
 static int interface_and_wheel(void)
 {
     fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
@@ -1813,6 +1867,7 @@ int main(int argc, char **argv)
         {"gmsh_malformed", gmsh_malformed},
         {"gmsh_roundtrip_tire", gmsh_roundtrip_tire},
         {"tire_mesher", tire_mesher},
+        {"tire_mesher_same_tire", tire_mesher_same_tire},
         {"interface_and_wheel", interface_and_wheel},
         {"rim_reaction_balances_loads", rim_reaction_balances_loads},
         {"subcycling", subcycling},

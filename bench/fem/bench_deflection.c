@@ -7,6 +7,10 @@
  *
  *   bench_deflection OUT.csv tet4:0.5 tet4:1.0 tet10:0.5 ...
  *
+ * (ELEMENT:RESOLUTION:refactor: the floor's reference method, for its cost;
+ * :nostep: no stability analysis and no explicit steps, for the finest
+ * meshes, whose step cost nobody pays; step_ms and dt_limit_s are nan.)
+ *
  * CSV columns: element, resolution, nodes, tets, deflection_mm, contact_nodes,
  * floor_s (the static floor solve, wall clock), floor_cpu_s (its process CPU
  * time: what a loaded machine does not inflate), passes (active-set passes
@@ -14,6 +18,8 @@
  * (median of 5 blocks of explicit steps at 0.9 of the limit), dt_limit_s.
  * Integer resolutions mesh the same tire (fem_mesh.c: the centre groove);
  * others round the groove. */
+#include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -52,10 +58,13 @@ int main(int argc, char **argv)
     fprintf(fp, "element,resolution,nodes,tets,deflection_mm,contact_nodes,floor_s,floor_cpu_s,passes,columns,step_ms,"
                 "dt_limit_s\n");
     for (int k = 2; k < argc; k++) {
-        char el[16];
+        char el[16], method[16] = "";
         double res;
-        if (sscanf(argv[k], "%15[^:]:%lf", el, &res) != 2 || (strcmp(el, "tet4") && strcmp(el, "tet10"))) {
-            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION expected (tet4 or tet10)\n", argv[k]);
+        int nf = sscanf(argv[k], "%15[^:]:%lf:%15s", el, &res, method);
+        if (nf < 2 || (strcmp(el, "tet4") && strcmp(el, "tet10")) ||
+            (nf == 3 && strcmp(method, "refactor") && strcmp(method, "nostep"))) {
+            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION[:refactor|:nostep] expected (tet4 or "
+                    "tet10)\n", argv[k]);
             return 2;
         }
         fem_config c = fem_config_default();
@@ -68,22 +77,28 @@ int main(int argc, char **argv)
         c.floor = true;
         c.floor_set = FEM_SET_CONTACT;
         c.floor_load = 400.0;
+        const bool refactor = strcmp(method, "refactor") == 0, steps = strcmp(method, "nostep") != 0;
+        c.floor_refactor = refactor; /* the reference method: a factorization per active-set pass */
+        if (!steps)
+            c.integrator = FEM_INTEGRATOR_RIGID; /* no stability analysis */
         cm_error err = {0};
         fem_model *m;
         if (fem_create(&c, &m, &err)) {
             fprintf(stderr, "bench_deflection: %s\n", err.msg);
             return 1;
         }
-        fem_stability st;
-        fem_get_stability(m, &st);
-        m->cfg.dt = 0.9 * st.dt_limit;
+        fem_stability st = {.dt_limit = NAN};
+        if (steps) {
+            fem_get_stability(m, &st);
+            m->cfg.dt = 0.9 * st.dt_limit;
+        }
         /* explicit steps from the inflated static state */
-        double blocks[5];
+        double blocks[5] = {NAN, NAN, NAN, NAN, NAN};
         if (fem_solve_static(m, &err)) {
             fprintf(stderr, "bench_deflection: %s\n", err.msg);
             return 1;
         }
-        for (int b = 0; b < 5; b++) {
+        for (int b = 0; b < 5 && steps; b++) {
             double t0 = cm_now();
             for (int i = 0; i < 40; i++)
                 if (fem_advance(m, NULL, m->cfg.dt, &err)) {
@@ -92,7 +107,8 @@ int main(int argc, char **argv)
                 }
             blocks[b] = (cm_now() - t0) / 40;
         }
-        qsort(blocks, 5, sizeof *blocks, cmp_double);
+        if (steps)
+            qsort(blocks, 5, sizeof *blocks, cmp_double);
         fem_floor_result r;
         double t0 = cm_now(), c0 = cpu_now();
         if (fem_floor_static(m, &r, &err)) {
@@ -102,8 +118,9 @@ int main(int argc, char **argv)
         double t_floor = cm_now() - t0, c_floor = cpu_now() - c0;
         int nn, nt;
         fem_mesh_size(m, &nn, &nt);
-        fprintf(fp, "%s,%g,%d,%d,%.6f,%d,%.3f,%.3f,%d,%d,%.4f,%.4g\n", el, res, nn, nt, 1e3 * r.deflection,
-                r.contact_nodes, t_floor, c_floor, r.solves, r.columns, 1e3 * blocks[2], st.dt_limit);
+        fprintf(fp, "%s%s,%g,%d,%d,%.6f,%d,%.3f,%.3f,%d,%d,%.4f,%.4g\n", el, refactor ? "_refactor" : "", res, nn, nt,
+                1e3 * r.deflection, r.contact_nodes, t_floor, c_floor, r.solves, r.columns, 1e3 * blocks[2],
+                st.dt_limit);
         fflush(fp);
         printf("%s res %g: %d nodes, %d tets: deflection %.6f mm (%d nodes touch, %d passes, %d columns, %.1f s, "
                "%.1f s CPU); step %.3f ms, limit %.3g s\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes,

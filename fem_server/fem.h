@@ -64,6 +64,8 @@ typedef struct fem_tire_def {
                                below outer_radius form the contact set: 0.06 */
     double resolution;      /* 1 = paper (about 24 000 tets); cells per direction
                                scale with it, so elements ~ resolution^2..3 */
+    int layers;             /* cells through the wall and through the lugs, each; 0: round(resolution)
+                               (at least 1) */
 } fem_tire_def;
 
 fem_tire_def fem_tire_def_default(void);

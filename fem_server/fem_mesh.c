@@ -471,6 +471,7 @@ fem_tire_def fem_tire_def_default(void)
     d.lug_fraction = 0.5;
     d.contact_depth = 0.06;
     d.resolution = 1.0;
+    d.layers = 0;
     return d;
 }
 
@@ -602,8 +603,10 @@ int fem_mesh_tire_order(const fem_tire_def *d, int order, fem_mesh *m, cm_error 
         t.lug_cells = 1;
     if (t.lug_cells >= t.cpp)
         t.lug_cells = t.cpp - 1;
-    t.n_wall = iround_min1(res);
-    t.n_lug = d->lug_depth > 0.0 ? iround_min1(res) : 0;
+    if (d->layers < 0 || d->layers > 64)
+        return cm_fail(err, CM_ERR_RANGE, "tire mesh: layers %d outside [0, 64] (0: round(resolution))", d->layers);
+    t.n_wall = d->layers > 0 ? d->layers : iround_min1(res);
+    t.n_lug = d->lug_depth > 0.0 ? t.n_wall : 0;
     fem_grid g = {t.n_theta, t.n_s, t.n_wall + t.n_lug, true, tire_map, tire_cell, &t};
     memset(m, 0, sizeof *m);
     snprintf(m->source, sizeof m->source, "tire mesh");

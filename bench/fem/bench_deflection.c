@@ -7,9 +7,12 @@
  *
  *   bench_deflection OUT.csv tet4:0.5 tet4:1.0 tet10:0.5 ...
  *
- * (ELEMENT:RESOLUTION:refactor: the floor's reference method, for its cost;
- * :nostep: no stability analysis and no explicit steps, for the finest
- * meshes, whose step cost nobody pays; step_ms and dt_limit_s are nan.)
+ * Options after a second colon, comma-separated: refactor (the floor's
+ * reference method, for its cost), nostep (no stability analysis and no
+ * explicit steps, for the finest meshes, whose step cost nobody pays;
+ * step_ms and dt_limit_s are nan), layersN (fem.mesh.layers = N: cells
+ * through the wall and the lugs; the resolution column then reads
+ * RES/N).
  *
  * CSV columns: element, resolution, nodes, tets, deflection_mm, contact_nodes,
  * floor_s (the static floor solve, wall clock), floor_cpu_s (its process CPU
@@ -58,13 +61,22 @@ int main(int argc, char **argv)
     fprintf(fp, "element,resolution,nodes,tets,deflection_mm,contact_nodes,floor_s,floor_cpu_s,passes,columns,step_ms,"
                 "dt_limit_s\n");
     for (int k = 2; k < argc; k++) {
-        char el[16], method[16] = "";
+        char el[16], opts[64] = "";
         double res;
-        int nf = sscanf(argv[k], "%15[^:]:%lf:%15s", el, &res, method);
-        if (nf < 2 || (strcmp(el, "tet4") && strcmp(el, "tet10")) ||
-            (nf == 3 && strcmp(method, "refactor") && strcmp(method, "nostep"))) {
-            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION[:refactor|:nostep] expected (tet4 or "
-                    "tet10)\n", argv[k]);
+        int nf = sscanf(argv[k], "%15[^:]:%lf:%63s", el, &res, opts);
+        bool refactor = false, steps = true, ok = nf >= 2 && (!strcmp(el, "tet4") || !strcmp(el, "tet10"));
+        int layers = 0;
+        for (char *save = NULL, *tok = strtok_r(opts, ",", &save); tok && ok; tok = strtok_r(NULL, ",", &save)) {
+            if (!strcmp(tok, "refactor"))
+                refactor = true;
+            else if (!strcmp(tok, "nostep"))
+                steps = false;
+            else
+                ok = sscanf(tok, "layers%d", &layers) == 1 && layers >= 1;
+        }
+        if (!ok) {
+            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION[:OPTION,...] expected (tet4 or tet10; "
+                    "options refactor, nostep, layersN)\n", argv[k]);
             return 2;
         }
         fem_config c = fem_config_default();
@@ -77,7 +89,7 @@ int main(int argc, char **argv)
         c.floor = true;
         c.floor_set = FEM_SET_CONTACT;
         c.floor_load = 400.0;
-        const bool refactor = strcmp(method, "refactor") == 0, steps = strcmp(method, "nostep") != 0;
+        c.tire.layers = layers;
         c.floor_refactor = refactor; /* the reference method: a factorization per active-set pass */
         if (!steps)
             c.integrator = FEM_INTEGRATOR_RIGID; /* no stability analysis */
@@ -118,13 +130,19 @@ int main(int argc, char **argv)
         double t_floor = cm_now() - t0, c_floor = cpu_now() - c0;
         int nn, nt;
         fem_mesh_size(m, &nn, &nt);
-        fprintf(fp, "%s%s,%g,%d,%d,%.6f,%d,%.3f,%.3f,%d,%d,%.4f,%.4g\n", el, refactor ? "_refactor" : "", res, nn, nt,
+        char rescol[32];
+        if (layers)
+            snprintf(rescol, sizeof rescol, "%g/%d", res, layers);
+        else
+            snprintf(rescol, sizeof rescol, "%g", res);
+        fprintf(fp, "%s%s,%s,%d,%d,%.6f,%d,%.3f,%.3f,%d,%d,%.4f,%.4g\n", el, refactor ? "_refactor" : "", rescol, nn, nt,
                 1e3 * r.deflection, r.contact_nodes, t_floor, c_floor, r.solves, r.columns, 1e3 * blocks[2],
                 st.dt_limit);
         fflush(fp);
-        printf("%s res %g: %d nodes, %d tets: deflection %.6f mm (%d nodes touch, %d passes, %d columns, %.1f s, "
-               "%.1f s CPU); step %.3f ms, limit %.3g s\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes,
-               r.solves, r.columns, t_floor, c_floor, 1e3 * blocks[2], st.dt_limit);
+        printf("%s res %s: %d nodes, %d tets: deflection %.6f mm (%d nodes touch, %d passes, %d columns, %.1f s, "
+               "%.1f s CPU; the inflated tire's lowest point z = %.6f mm); step %.3f ms, limit %.3g s\n", el, rescol, nn,
+               nt, 1e3 * r.deflection, r.contact_nodes, r.solves, r.columns, t_floor, c_floor, 1e3 * r.z_free,
+               1e3 * blocks[2], st.dt_limit);
         fflush(stdout);
         fem_destroy(&m);
     }

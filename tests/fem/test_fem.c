@@ -943,6 +943,50 @@ static int tire_mesher_same_tire(void)
     return 0;
 }
 
+/* fem.mesh.layers: the cells through the wall and through the lugs, read
+ * from the scene (0..64), independent of the resolution; the same tire
+ * (its volume within the chords' 1e-3) with three layers each instead of
+ * one. */
+static int tire_mesher_layers(void)
+{
+    const char *text = "fem = {\n  mesh = { type = \"tire\"; resolution = 0.25; layers = 3; };\n"
+                       "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n};\n";
+    static const char *const sections[] = {"fem", NULL};
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(text, "t.cfg", &s, &err) == CM_OK);
+    fem_config c = fem_config_default();
+    ENSURE_MSG(fem_config_read(s, &c, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s", err.msg);
+    ENSURE(c.tire.layers == 3 && c.tire.resolution == 0.25);
+    cm_scene_close(&s);
+    double vol[2];
+    int kmax[2];
+    for (int k = 0; k < 2; k++) {
+        fem_tire_def d = c.tire;
+        d.layers = k ? 3 : 0;
+        fem_mesh m;
+        ENSURE_MSG(fem_mesh_tire(&d, &m, &err) == CM_OK, "%s", err.msg);
+        fem_mesh_measure(&m, NULL, &vol[k]);
+        kmax[k] = 0;
+        for (int n = 0; n < m.n_nodes; n++)
+            kmax[k] = m.node_ijk[3 * n + 2] > kmax[k] ? m.node_ijk[3 * n + 2] : kmax[k];
+        fem_mesh_free(&m);
+    }
+    printf("  resolution 0.25: %d node layers (default), %d with layers = 3; volume %.6f / %.6f m^3\n", kmax[0] + 1,
+           kmax[1] + 1, vol[0], vol[1]);
+    ENSURE(kmax[0] == 2 && kmax[1] == 6);
+    ENSURE_REL(vol[1], vol[0], 1e-3);
+    const char *bad = "fem = {\n  mesh = { type = \"tire\"; layers = -1; };\n"
+                      "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n};\n";
+    ENSURE(cm_scene_open_string(bad, "bad.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE(fem_config_read(s, &c, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "fem.mesh.layers"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
 static int interface_and_wheel(void)
 {
     fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
@@ -1931,6 +1975,7 @@ int main(int argc, char **argv)
         {"gmsh_roundtrip_tire", gmsh_roundtrip_tire},
         {"tire_mesher", tire_mesher},
         {"tire_mesher_same_tire", tire_mesher_same_tire},
+        {"tire_mesher_layers", tire_mesher_layers},
         {"interface_and_wheel", interface_and_wheel},
         {"rim_reaction_balances_loads", rim_reaction_balances_loads},
         {"subcycling", subcycling},

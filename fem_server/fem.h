@@ -64,6 +64,8 @@ typedef struct fem_tire_def {
                                below outer_radius form the contact set: 0.06 */
     double resolution;      /* 1 = paper (about 24 000 tets); cells per direction
                                scale with it, so elements ~ resolution^2..3 */
+    int layers;             /* cells through the wall and through the lugs, each; 0: round(resolution)
+                               (at least 1) */
 } fem_tire_def;
 
 fem_tire_def fem_tire_def_default(void);
@@ -138,6 +140,10 @@ typedef struct fem_config {
     fem_set floor_set;
     double floor_height;     /* m */
     double floor_load;       /* N, 0: the height is given */
+    bool floor_refactor;     /* not a scene key: the floor's reference method (each active-set pass
+                                refactorizes K with the touching nodes held; also taken with
+                                static_solver = cg); tests compare the default (K factorized once, the
+                                active set through the contact nodes' influence matrix) with it */
 } fem_config;
 
 fem_config fem_config_default(void);
@@ -235,7 +241,10 @@ void fem_mass_properties(const fem_model *m, double *mass, double *inertia_axle)
 /* The static solve against the rigid frictionless floor of cfg.floor (kinematic: the touching
  * nodes' z held on the plane, an active set iterated until every held node is pushed, not
  * pulled, and no free node is below the plane); with cfg.floor_load the height is searched
- * (bracketed secant) until the floor carries that load within 1e-6. */
+ * (bracketed secant) until the floor carries that load within 1e-6. K is factorized once (the
+ * supports only); each pass solves the small dense system of the held nodes' influence matrix
+ * G_AA = (K^-1)_AA for their reactions, u = u0 + K^-1 E_A lambda: exact, the same answer as
+ * holding the nodes in K (fem_config.floor_refactor, the reference) to round-off. */
 typedef struct fem_floor_result {
     double height;      /* m, the floor plane (rim frame) */
     double deflection;  /* m, height - z_free: how far the floor pressed in */
@@ -244,7 +253,10 @@ typedef struct fem_floor_result {
     double reaction;    /* N, the floor's push on the body (+z) */
     double max_below;   /* m, the deepest node of the set below the plane (0 up to round-off) */
     int contact_nodes;  /* nodes held on the plane */
-    int solves;         /* linear solves done */
+    int solves;         /* active-set passes over the whole search */
+    int factorizations; /* of K: 1 (the reference method, fem_config.floor_refactor: one per pass) */
+    int columns;        /* influence columns K^-1 e_z solved, one per node that was ever held (0 for the
+                           reference method) */
 } fem_floor_result;
 int fem_floor_static(fem_model *m, fem_floor_result *r, cm_error *err);
 

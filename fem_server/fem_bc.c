@@ -215,14 +215,32 @@ typedef struct floor_ctx {
     double *base_val, *val;  /* per dof: their values; this solve's */
     double *r;               /* per dof: K u - b */
     double zmin;             /* m, the set's lowest z without the floor (fem_floor_result.z_free) */
-    int solves;
+    int solves, factorizations;
+    /* The influence method (default): K factorized once with the supports only. */
+    bool influence;
+    double *u0;              /* per dof: the solution without the floor */
+    int n_cand;
+    int32_t *cand_node;      /* candidate index -> node */
+    int32_t *cand_of;        /* node -> candidate index, -1 */
+    int32_t *col_of;         /* node -> its influence column, -1: not solved yet */
+    int n_col, cap_col;
+    double *G;               /* n_col columns of n_cand: (K^-1 e_z(node of column))_z at every candidate */
+    int32_t *act;            /* the held nodes of a pass, in node order */
+    double *S, *lam, *zc;    /* the dense |A| x |A| system, the reactions, z of every candidate */
+    int cap_act;
 } floor_ctx;
 
-/* The static state with the floor at `height`: the active set (nodes held
- * at z = height) grows by the free nodes found below the plane and loses
- * the held nodes the plane pulls (K u - b < 0 in z), until neither happens.
- * Frictionless: only z is held. Each pass refactorizes K_ff (CHOLMOD). */
-static int floor_solve(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
+static int floor_oom(cm_error *err)
+{
+    return cm_fail(err, CM_ERR_NOMEM, "fem.floor: out of memory");
+}
+
+/* The reference method: the static state with the floor at `height`: the
+ * active set (nodes held at z = height) grows by the free nodes found below
+ * the plane and loses the held nodes the plane pulls (K u - b < 0 in z),
+ * until neither happens. Frictionless: only z is held. Each pass
+ * refactorizes K_ff (CHOLMOD), or runs CG. */
+static int floor_solve_refactor(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
 {
     fem_model *m = c->m;
     fem_solver *s = m->s;
@@ -244,6 +262,7 @@ static int floor_solve(floor_ctx *c, double height, fem_floor_result *res, cm_er
         fem_model_build_load(m, NULL);
         rc = fem_solver_static(s, s->f, m->cfg.static_solver, m->cfg.cg_tol, m->cfg.cg_max_iter, s->u, NULL, err);
         c->solves++;
+        c->factorizations++;
         if (rc)
             return cm_fail_prefix(err, "fem.floor: static solve");
         fem_solver_matvec(s, s->u, c->r);
@@ -280,11 +299,244 @@ static int floor_solve(floor_ctx *c, double height, fem_floor_result *res, cm_er
             res->max_below = below;
             res->contact_nodes = held;
             res->solves = c->solves;
+            res->factorizations = c->factorizations;
+            res->columns = 0;
             return CM_OK;
         }
     }
     return cm_fail(err, CM_ERR_NUMERIC, "fem.floor: the contact set did not settle in 200 passes (floor at z = %.6g m)",
                    height);
+}
+
+/* Influence columns for the held nodes that have none yet: K^-1 e_z per
+ * node, kept at the candidates' z dofs; solved in batches with the one
+ * factor of K. */
+static int floor_columns(floor_ctx *c, int n_act, cm_error *err)
+{
+    fem_solver *s = c->m->s;
+    const size_t nd = (size_t)s->n_dof;
+    int need = 0;
+    for (int k = 0; k < n_act; k++)
+        need += c->col_of[c->act[k]] < 0;
+    if (need == 0)
+        return CM_OK;
+    if (c->n_col + need > c->cap_col) {
+        int cap = c->cap_col ? c->cap_col : 64;
+        while (cap < c->n_col + need)
+            cap *= 2;
+        double *g = realloc(c->G, (size_t)cap * (size_t)c->n_cand * sizeof *g);
+        if (!g)
+            return floor_oom(err);
+        c->G = g;
+        c->cap_col = cap;
+    }
+    /* at most ~256 MB per right-hand-side block */
+    int batch = (int)(32000000 / nd);
+    batch = batch < 1 ? 1 : batch > 32 ? 32 : batch;
+    double *B = calloc(nd * (size_t)batch, sizeof *B), *X = malloc(nd * (size_t)batch * sizeof *X);
+    int32_t *nodes = malloc((size_t)batch * sizeof *nodes);
+    int rc = CM_OK;
+    if (!B || !X || !nodes)
+        rc = floor_oom(err);
+    for (int k = 0; k < n_act && !rc;) {
+        int nb = 0;
+        for (; k < n_act && nb < batch; k++)
+            if (c->col_of[c->act[k]] < 0)
+                nodes[nb++] = c->act[k];
+        if (nb == 0)
+            break;
+        memset(B, 0, nd * (size_t)nb * sizeof *B);
+        for (int q = 0; q < nb; q++)
+            B[(size_t)q * nd + 3 * (size_t)nodes[q] + 2] = 1.0;
+        if ((rc = fem_solver_solve_free(s, nb, B, X, err)))
+            break;
+        for (int q = 0; q < nb; q++) {
+            double *g = &c->G[(size_t)c->n_col * (size_t)c->n_cand];
+            const double *x = &X[(size_t)q * nd];
+            for (int i = 0; i < c->n_cand; i++)
+                g[i] = x[3 * (size_t)c->cand_node[i] + 2];
+            c->col_of[nodes[q]] = c->n_col++;
+        }
+    }
+    free(B);
+    free(X);
+    free(nodes);
+    return rc;
+}
+
+/* Cholesky of the n x n SPD matrix S (row-major, in place: lower triangle),
+ * then S x = b in place of b. Returns the failing column + 1, 0 on success. */
+static int dense_cholesky_solve(int n, double *S, double *b)
+{
+    for (int j = 0; j < n; j++) {
+        double d = S[(size_t)j * n + j];
+        for (int k = 0; k < j; k++)
+            d -= S[(size_t)j * n + k] * S[(size_t)j * n + k];
+        if (!(d > 0.0))
+            return j + 1;
+        d = sqrt(d);
+        S[(size_t)j * n + j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double v = S[(size_t)i * n + j];
+            for (int k = 0; k < j; k++)
+                v -= S[(size_t)i * n + k] * S[(size_t)j * n + k];
+            S[(size_t)i * n + j] = v / d;
+        }
+    }
+    for (int i = 0; i < n; i++) { /* L y = b */
+        double v = b[i];
+        for (int k = 0; k < i; k++)
+            v -= S[(size_t)i * n + k] * b[k];
+        b[i] = v / S[(size_t)i * n + i];
+    }
+    for (int i = n - 1; i >= 0; i--) { /* L^T x = y */
+        double v = b[i];
+        for (int k = i + 1; k < n; k++)
+            v -= S[(size_t)k * n + i] * b[k];
+        b[i] = v / S[(size_t)i * n + i];
+    }
+    return 0;
+}
+
+/* The same active set as floor_solve_refactor, through the influence
+ * matrix: with the held nodes A at z = height, u = u0 + sum_j lambda_j
+ * K^-1 e_z(j), where G_AA lambda = height - X_z - u0_z on A (lambda: the
+ * floor's push on each held node, K u - b in z). Leaves the solver
+ * untouched; the state is set by floor_finish. */
+static int floor_solve_influence(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
+{
+    fem_model *m = c->m;
+    const int nn = m->mesh.n_nodes;
+    const double *X = m->mesh.x;
+    const double tol = 1e-12 * (m->size > 0 ? m->size : 1.0);
+    for (int n = 0; n < nn; n++)
+        c->active[n] = c->cand[n] && X[3 * n + 2] <= height + tol;
+    for (int pass = 0; pass < 200; pass++) {
+        int na = 0;
+        for (int i = 0; i < c->n_cand; i++)
+            if (c->active[c->cand_node[i]])
+                c->act[na++] = c->cand_node[i];
+        if (na > c->cap_act) {
+            int cap = na * 2;
+            double *S = realloc(c->S, (size_t)cap * (size_t)cap * sizeof *S), *lam;
+            if (!S)
+                return floor_oom(err);
+            c->S = S;
+            if (!(lam = realloc(c->lam, (size_t)cap * sizeof *lam)))
+                return floor_oom(err);
+            c->lam = lam;
+            c->cap_act = cap;
+        }
+        int rc = floor_columns(c, na, err);
+        if (rc)
+            return cm_fail_prefix(err, "fem.floor: influence columns");
+        c->solves++;
+        for (int a = 0; a < na; a++) {
+            const double *ga = &c->G[(size_t)c->col_of[c->act[a]] * (size_t)c->n_cand];
+            for (int b = 0; b < na; b++)
+                c->S[(size_t)a * na + b] = ga[c->cand_of[c->act[b]]];
+            int dz = 3 * c->act[a] + 2;
+            c->lam[a] = height - X[dz] - c->u0[dz];
+        }
+        for (int a = 0; a < na; a++) /* symmetric up to round-off: use the mean */
+            for (int b = 0; b < a; b++) {
+                double v = 0.5 * (c->S[(size_t)a * na + b] + c->S[(size_t)b * na + a]);
+                c->S[(size_t)a * na + b] = c->S[(size_t)b * na + a] = v;
+            }
+        int bad = dense_cholesky_solve(na, c->S, c->lam);
+        if (bad)
+            return cm_fail(err, CM_ERR_NUMERIC, "fem.floor: the influence matrix of the %d held nodes is not positive "
+                           "definite (pivot %d; floor at z = %.6g m)", na, bad, height);
+        for (int i = 0; i < c->n_cand; i++)
+            c->zc[i] = X[3 * (size_t)c->cand_node[i] + 2] + c->u0[3 * (size_t)c->cand_node[i] + 2];
+        for (int a = 0; a < na; a++) {
+            const double *ga = &c->G[(size_t)c->col_of[c->act[a]] * (size_t)c->n_cand];
+            const double l = c->lam[a];
+            for (int i = 0; i < c->n_cand; i++)
+                c->zc[i] += ga[i] * l;
+        }
+        int changed = 0, held = 0, a = 0;
+        double reaction = 0.0, below = 0.0;
+        for (int i = 0; i < c->n_cand; i++) {
+            int n = c->cand_node[i];
+            if (c->active[n]) {
+                double rz = c->lam[a++];
+                if (rz < 0.0) {
+                    c->active[n] = 0;
+                    changed = 1;
+                } else {
+                    reaction += rz;
+                    held++;
+                }
+            } else if (c->zc[i] < height - tol) {
+                c->active[n] = 1;
+                changed = 1;
+            } else {
+                below = fmax(below, height - c->zc[i]);
+            }
+        }
+        if (!changed) {
+            res->height = height;
+            res->deflection = height - c->zmin;
+            res->z_free = c->zmin;
+            res->reaction = reaction;
+            res->max_below = below;
+            res->contact_nodes = held;
+            res->solves = c->solves;
+            res->factorizations = c->factorizations;
+            res->columns = c->n_col;
+            return CM_OK;
+        }
+    }
+    return cm_fail(err, CM_ERR_NUMERIC, "fem.floor: the contact set did not settle in 200 passes (floor at z = %.6g m)",
+                   height);
+}
+
+static int floor_solve(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
+{
+    return c->influence ? floor_solve_influence(c, height, res, err) : floor_solve_refactor(c, height, res, err);
+}
+
+/* The influence method's state of the last floor_solve: u = u0 + K^-1
+ * E_A lambda (one more solve), then the solver constrained as the
+ * reference method leaves it (the held nodes' z fixed at the plane), so
+ * that the model after the floor is the same whichever method ran. */
+static int floor_finish(floor_ctx *c, double height, cm_error *err)
+{
+    fem_model *m = c->m;
+    fem_solver *s = m->s;
+    const int nd = s->n_dof;
+    double *b = calloc((size_t)nd, sizeof *b), *x = malloc((size_t)nd * sizeof *x);
+    int rc = CM_OK;
+    if (!b || !x)
+        rc = floor_oom(err);
+    int a = 0;
+    for (int i = 0; i < c->n_cand && !rc; i++)
+        if (c->active[c->cand_node[i]])
+            b[3 * (size_t)c->cand_node[i] + 2] = c->lam[a++];
+    if (!rc)
+        rc = fem_solver_solve_free(s, 1, b, x, err);
+    if (!rc) {
+        for (int d = 0; d < nd; d++)
+            x[d] += c->u0[d];
+        memcpy(s->fixed, c->base_fixed, (size_t)nd);
+        memcpy(c->val, c->base_val, (size_t)nd * sizeof *c->val);
+        for (int i = 0; i < c->n_cand; i++)
+            if (c->active[c->cand_node[i]]) {
+                int dz = 3 * c->cand_node[i] + 2;
+                s->fixed[dz] = 1;
+                c->val[dz] = height - m->mesh.x[dz];
+                x[dz] = c->val[dz]; /* on the plane exactly, as the reference holds it */
+            }
+        rc = fem_solver_constrain(s, s->fixed, c->val, err);
+    }
+    if (!rc) {
+        fem_solver_set_state(s, x, NULL);
+        m->static_done = true;
+    }
+    free(b);
+    free(x);
+    return rc;
 }
 
 int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
@@ -302,8 +554,9 @@ int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
     c.val = malloc((size_t)nd * sizeof *c.val);
     c.r = malloc((size_t)nd * sizeof *c.r);
     int rc = CM_OK;
+    double h_final = 0.0;
     if (!c.cand || !c.active || !c.base_fixed || !c.base_val || !c.val || !c.r) {
-        rc = cm_fail(err, CM_ERR_NOMEM, "fem.floor: out of memory");
+        rc = floor_oom(err);
         goto done;
     }
     planes p = box_planes(&m->mesh);
@@ -318,6 +571,38 @@ int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
     for (int n = 0; n < nn; n++)
         if (c.cand[n])
             c.zmin = fmin(c.zmin, m->mesh.x[3 * n + 2]);
+    fem_model_build_load(m, NULL);
+    if (!cfg->floor_refactor && cfg->static_solver == FEM_LINEAR_CHOLMOD) {
+        /* u0: the supports only, K factorized once. A body the floor must hold (K singular without it)
+         * cannot: it takes the reference method. */
+        cm_error e0 = {0};
+        c.u0 = malloc((size_t)nd * sizeof *c.u0);
+        if (!c.u0) {
+            rc = floor_oom(err);
+            goto done;
+        }
+        if (fem_solver_static(s, s->f, FEM_LINEAR_CHOLMOD, 0.0, 0, c.u0, NULL, &e0) == CM_OK) {
+            c.influence = true;
+            c.factorizations = 1;
+            for (int n = 0; n < nn; n++)
+                c.n_cand += c.cand[n];
+            c.cand_node = malloc((size_t)c.n_cand * sizeof *c.cand_node);
+            c.cand_of = malloc((size_t)nn * sizeof *c.cand_of);
+            c.col_of = malloc((size_t)nn * sizeof *c.col_of);
+            c.act = malloc((size_t)c.n_cand * sizeof *c.act);
+            c.zc = malloc((size_t)c.n_cand * sizeof *c.zc);
+            if (!c.cand_node || !c.cand_of || !c.col_of || !c.act || !c.zc) {
+                rc = floor_oom(err);
+                goto done;
+            }
+            for (int n = 0, i = 0; n < nn; n++) {
+                c.col_of[n] = -1;
+                c.cand_of[n] = c.cand[n] ? i : -1;
+                if (c.cand[n])
+                    c.cand_node[i++] = n;
+            }
+        }
+    }
     { /* the lowest point under the loads alone (the inflated tire), when the supports hold the body */
         fem_floor_result r0;
         cm_error e0 = {0};
@@ -325,11 +610,12 @@ int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
             double z = INFINITY;
             for (int n = 0; n < nn; n++)
                 if (c.cand[n])
-                    z = fmin(z, m->mesh.x[3 * n + 2] + s->u[3 * n + 2]);
+                    z = fmin(z, m->mesh.x[3 * n + 2] + (c.influence ? c.u0 : s->u)[3 * n + 2]);
             c.zmin = z;
         }
     }
     if (!(cfg->floor_load > 0)) {
+        h_final = cfg->floor_height;
         rc = floor_solve(&c, cfg->floor_height, res, err);
         goto done;
     }
@@ -369,6 +655,7 @@ int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
         double fr = r.reaction - L;
         if (fabs(fr) <= 1e-6 * L || h_hi - h_lo <= 1e-12 * m->size) {
             *res = r;
+            h_final = h;
             goto done;
         }
         if (fr > 0) {
@@ -385,11 +672,22 @@ int fem_floor_static(fem_model *m, fem_floor_result *res, cm_error *err)
     }
     rc = cm_fail(err, CM_ERR_NUMERIC, "fem.floor.load = %g N: the height search did not converge", L);
 done:
+    if (rc == CM_OK && c.influence)
+        rc = floor_finish(&c, h_final, err);
     free(c.cand);
     free(c.active);
     free(c.base_fixed);
     free(c.base_val);
     free(c.val);
     free(c.r);
+    free(c.u0);
+    free(c.cand_node);
+    free(c.cand_of);
+    free(c.col_of);
+    free(c.G);
+    free(c.act);
+    free(c.S);
+    free(c.lam);
+    free(c.zc);
     return rc;
 }

@@ -4,6 +4,7 @@
  *     type = "tire" | "gmsh" | "box";
  *     # tire (all optional; defaults = the paper's 165/65 R13, fem.h):
  *     resolution = 1.0;        # 1: ~24 000 tets; 0.25: ~1 500
+ *     layers = 0;              # cells through the wall and through the lugs each; 0: round(resolution)
  *     outer_radius = 0.272;    # m, lug tops
  *     rim_radius = 0.1651;     # m
  *     width = 0.165;           # m, tread width over the lugs
@@ -185,6 +186,7 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
         TRY(read_int_opt(s, "fem.mesh.lugs", 1, 1000, d.lugs, &t->lugs, err));
         TRY(cm_scene_double_opt(s, "fem.mesh.lug_fraction", 0.01, 0.99, d.lug_fraction, &t->lug_fraction, err));
         TRY(cm_scene_double_opt(s, "fem.mesh.contact_depth", 0.0, 10.0, d.contact_depth, &t->contact_depth, err));
+        TRY(read_int_opt(s, "fem.mesh.layers", 0, 64, d.layers, &t->layers, err));
     } else if (c->mesh == FEM_MESH_GMSH) {
         char file[512];
         TRY(cm_scene_string(s, "fem.mesh.file", file, sizeof file, err));

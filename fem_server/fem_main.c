@@ -133,9 +133,10 @@ static int run_fem_only(const options *o, cm_scene *scene, fem_config *cfg, cm_r
         fem_floor_result fr;
         if ((rc = fem_floor_static(m, &fr, err)) == CM_OK) {
             cm_log_info("floor: at z = %.6g m, %.6g m above the set's lowest point (the deflection): reaction %.6g N "
-                        "on %d nodes, deepest node %.3g m below it; %d linear solves in %.2f s",
+                        "on %d nodes, deepest node %.3g m below it; %d active-set passes, %d factorization(s) of K, "
+                        "%d influence columns, %.2f s",
                         fr.height, fr.deflection, fr.reaction, fr.contact_nodes, fr.max_below, fr.solves,
-                        cm_now() - t0);
+                        fr.factorizations, fr.columns, cm_now() - t0);
             cm_runrec_num(rec, "floor_height", fr.height);
             cm_runrec_num(rec, "floor_deflection", fr.deflection);
             cm_runrec_num(rec, "floor_reaction", fr.reaction);

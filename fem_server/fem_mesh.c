@@ -471,6 +471,7 @@ fem_tire_def fem_tire_def_default(void)
     d.lug_fraction = 0.5;
     d.contact_depth = 0.06;
     d.resolution = 1.0;
+    d.layers = 0;
     return d;
 }
 
@@ -481,6 +482,7 @@ typedef struct tire_ctx {
     int n_side, n_arc, n_flat, n_s;
     int n_theta, cpp, lug_cells; /* cells around, cells per pitch, cells per lug */
     int n_wall, n_lug;           /* layers through wall and lug */
+    int n_groove;                /* crown cells each side of the centre line left without lugs */
 } tire_ctx;
 
 /* Mid-line point (y, r) and outward unit normal (away from the cavity) at
@@ -543,7 +545,7 @@ static bool tire_cell(const void *ctx, int i, int j, int k)
         return true;
     if (j < t->n_side || j >= t->n_s - t->n_side)
         return false; /* lugs only on shoulders and crown */
-    if (j == t->n_s / 2 - 1 || j == t->n_s / 2)
+    if (j >= t->n_s / 2 - t->n_groove && j < t->n_s / 2 + t->n_groove)
         return false; /* centre groove: left and right lugs would touch along an edge */
     int phase = j < t->n_s / 2 ? i % t->cpp : (i + t->cpp / 2) % t->cpp;
     return phase < t->lug_cells;
@@ -588,6 +590,12 @@ int fem_mesh_tire_order(const fem_tire_def *d, int order, fem_mesh *m, cm_error 
     if (t.n_flat < 4)
         t.n_flat = 4; /* room for the centre groove and a lug cell each side */
     t.n_s = 2 * t.n_side + 2 * t.n_arc + t.n_flat;
+    /* The centre groove is a quarter of the crown at every integer
+     * resolution (one cell each side at 1), so that resolutions 1, 2, 3, ...
+     * mesh the same tire (uniform refinement; it was two cells at every
+     * resolution, half the crown at 0.5 and an eighth at 2); other
+     * resolutions round it: half the crown at 0.5, a third at 0.75 and 1.5. */
+    t.n_groove = iround_min1(t.n_flat / 8.0);
     t.cpp = 2 * iround_min1(4.0 * res);
     t.n_theta = d->lugs * t.cpp;
     t.lug_cells = (int)lround(d->lug_fraction * t.cpp);
@@ -595,8 +603,10 @@ int fem_mesh_tire_order(const fem_tire_def *d, int order, fem_mesh *m, cm_error 
         t.lug_cells = 1;
     if (t.lug_cells >= t.cpp)
         t.lug_cells = t.cpp - 1;
-    t.n_wall = iround_min1(res);
-    t.n_lug = d->lug_depth > 0.0 ? iround_min1(res) : 0;
+    if (d->layers < 0 || d->layers > 64)
+        return cm_fail(err, CM_ERR_RANGE, "tire mesh: layers %d outside [0, 64] (0: round(resolution))", d->layers);
+    t.n_wall = d->layers > 0 ? d->layers : iround_min1(res);
+    t.n_lug = d->lug_depth > 0.0 ? t.n_wall : 0;
     fem_grid g = {t.n_theta, t.n_s, t.n_wall + t.n_lug, true, tire_map, tire_cell, &t};
     memset(m, 0, sizeof *m);
     snprintf(m->source, sizeof m->source, "tire mesh");

@@ -254,8 +254,8 @@ static double dot_free(const fem_solver *s, const double *a, const double *b)
     return acc;
 }
 
-/* Direct solve of the free block: x_f = Kff^-1 r_f (eq. of sect. 3.3). */
-static int static_cholmod(fem_solver *s, const double *r, double *du, cm_error *err)
+/* The Cholesky factor of Kff, made once per constraint set. */
+static int ensure_factor(fem_solver *s, cm_error *err)
 {
     if (!s->L) {
         s->L = cholmod_analyze(s->Kff, &s->cc);
@@ -269,6 +269,41 @@ static int static_cholmod(fem_solver *s, const double *r, double *du, cm_error *
             return rc;
         }
     }
+    return CM_OK;
+}
+
+int fem_solver_solve_free(fem_solver *s, int ncol, const double *b, double *x, cm_error *err)
+{
+    int rc = ensure_factor(s, err);
+    if (rc)
+        return rc;
+    const size_t n = (size_t)s->n_dof, nf = (size_t)s->n_free;
+    cholmod_dense *B = cholmod_zeros(nf, (size_t)ncol, CHOLMOD_REAL, &s->cc);
+    if (!B)
+        return cholmod_failed(s, err, "dense");
+    double *bx = B->x;
+    for (int c = 0; c < ncol; c++)
+        for (size_t k = 0; k < nf; k++)
+            bx[(size_t)c * nf + k] = b[(size_t)c * n + (size_t)s->free_dofs[k]];
+    cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, &s->cc);
+    cholmod_free_dense(&B, &s->cc);
+    if (!X)
+        return cholmod_failed(s, err, "solve");
+    const double *xx = X->x;
+    memset(x, 0, n * (size_t)ncol * sizeof *x);
+    for (int c = 0; c < ncol; c++)
+        for (size_t k = 0; k < nf; k++)
+            x[(size_t)c * n + (size_t)s->free_dofs[k]] = xx[(size_t)c * nf + k];
+    cholmod_free_dense(&X, &s->cc);
+    return CM_OK;
+}
+
+/* Direct solve of the free block: x_f = Kff^-1 r_f (eq. of sect. 3.3). */
+static int static_cholmod(fem_solver *s, const double *r, double *du, cm_error *err)
+{
+    int rc = ensure_factor(s, err);
+    if (rc)
+        return rc;
     double *b = s->rhs->x;
     for (int k = 0; k < s->n_free; k++)
         b[k] = r[s->free_dofs[k]];

@@ -72,6 +72,12 @@ void fem_solver_matvec(const fem_solver *s, const double *x, double *y);
 int fem_solver_static(fem_solver *s, const double *b, fem_linear_solver kind, double tol, int max_iter,
                       double *u, int *iters, cm_error *err);
 
+/* x = Kff^-1 b on the free dofs, 0 on the fixed ones, for ncol columns
+ * (b and x: ncol full-length vectors one after the other; b's fixed dofs
+ * are ignored). CHOLMOD; factorizes Kff on first use and keeps the factor
+ * until the constraints change. Allocates (not for time loops). */
+int fem_solver_solve_free(fem_solver *s, int ncol, const double *b, double *x, cm_error *err);
+
 /* Stable explicit step (see fem_stability in fem.h). */
 int fem_solver_stability(fem_solver *s, const fem_mesh *m, int max_power_iter, fem_stability *st,
                          cm_error *err);

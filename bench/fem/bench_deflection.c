@@ -7,17 +7,38 @@
  *
  *   bench_deflection OUT.csv tet4:0.5 tet4:1.0 tet10:0.5 ...
  *
+ * Options after a second colon, comma-separated: refactor (the floor's
+ * reference method, for its cost), nostep (no stability analysis and no
+ * explicit steps, for the finest meshes, whose step cost nobody pays;
+ * step_ms and dt_limit_s are nan), layersN (fem.mesh.layers = N: cells
+ * through the wall and the lugs; the resolution column then reads
+ * RES/N).
+ *
  * CSV columns: element, resolution, nodes, tets, deflection_mm, contact_nodes,
- * floor_s (the static floor solve), step_ms (median of 5 blocks of explicit
- * steps at 0.9 of the limit), dt_limit_s. */
+ * floor_s (the static floor solve, wall clock), floor_cpu_s (its process CPU
+ * time: what a loaded machine does not inflate), passes (active-set passes
+ * of the whole height search), columns (influence columns solved), step_ms
+ * (median of 5 blocks of explicit steps at 0.9 of the limit), dt_limit_s.
+ * Integer resolutions mesh the same tire (fem_mesh.c: the centre groove);
+ * others round the groove. */
+#include <math.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "fem.h"
 #include "fem_model.h"
 #include "log.h"
 #include "timer.h"
+
+static double cpu_now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
 
 static int cmp_double(const void *a, const void *b)
 {
@@ -37,12 +58,25 @@ int main(int argc, char **argv)
         perror(argv[1]);
         return 1;
     }
-    fprintf(fp, "element,resolution,nodes,tets,deflection_mm,contact_nodes,floor_s,step_ms,dt_limit_s\n");
+    fprintf(fp, "element,resolution,nodes,tets,deflection_mm,contact_nodes,floor_s,floor_cpu_s,passes,columns,step_ms,"
+                "dt_limit_s\n");
     for (int k = 2; k < argc; k++) {
-        char el[16];
+        char el[16], opts[64] = "";
         double res;
-        if (sscanf(argv[k], "%15[^:]:%lf", el, &res) != 2 || (strcmp(el, "tet4") && strcmp(el, "tet10"))) {
-            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION expected (tet4 or tet10)\n", argv[k]);
+        int nf = sscanf(argv[k], "%15[^:]:%lf:%63s", el, &res, opts);
+        bool refactor = false, steps = true, ok = nf >= 2 && (!strcmp(el, "tet4") || !strcmp(el, "tet10"));
+        int layers = 0;
+        for (char *save = NULL, *tok = strtok_r(opts, ",", &save); tok && ok; tok = strtok_r(NULL, ",", &save)) {
+            if (!strcmp(tok, "refactor"))
+                refactor = true;
+            else if (!strcmp(tok, "nostep"))
+                steps = false;
+            else
+                ok = sscanf(tok, "layers%d", &layers) == 1 && layers >= 1;
+        }
+        if (!ok) {
+            fprintf(stderr, "bench_deflection: \"%s\": ELEMENT:RESOLUTION[:OPTION,...] expected (tet4 or tet10; "
+                    "options refactor, nostep, layersN)\n", argv[k]);
             return 2;
         }
         fem_config c = fem_config_default();
@@ -55,22 +89,28 @@ int main(int argc, char **argv)
         c.floor = true;
         c.floor_set = FEM_SET_CONTACT;
         c.floor_load = 400.0;
+        c.tire.layers = layers;
+        c.floor_refactor = refactor; /* the reference method: a factorization per active-set pass */
+        if (!steps)
+            c.integrator = FEM_INTEGRATOR_RIGID; /* no stability analysis */
         cm_error err = {0};
         fem_model *m;
         if (fem_create(&c, &m, &err)) {
             fprintf(stderr, "bench_deflection: %s\n", err.msg);
             return 1;
         }
-        fem_stability st;
-        fem_get_stability(m, &st);
-        m->cfg.dt = 0.9 * st.dt_limit;
+        fem_stability st = {.dt_limit = NAN};
+        if (steps) {
+            fem_get_stability(m, &st);
+            m->cfg.dt = 0.9 * st.dt_limit;
+        }
         /* explicit steps from the inflated static state */
-        double blocks[5];
+        double blocks[5] = {NAN, NAN, NAN, NAN, NAN};
         if (fem_solve_static(m, &err)) {
             fprintf(stderr, "bench_deflection: %s\n", err.msg);
             return 1;
         }
-        for (int b = 0; b < 5; b++) {
+        for (int b = 0; b < 5 && steps; b++) {
             double t0 = cm_now();
             for (int i = 0; i < 40; i++)
                 if (fem_advance(m, NULL, m->cfg.dt, &err)) {
@@ -79,21 +119,29 @@ int main(int argc, char **argv)
                 }
             blocks[b] = (cm_now() - t0) / 40;
         }
-        qsort(blocks, 5, sizeof *blocks, cmp_double);
+        if (steps)
+            qsort(blocks, 5, sizeof *blocks, cmp_double);
         fem_floor_result r;
-        double t0 = cm_now();
+        double t0 = cm_now(), c0 = cpu_now();
         if (fem_floor_static(m, &r, &err)) {
             fprintf(stderr, "bench_deflection: %s\n", err.msg);
             return 1;
         }
-        double t_floor = cm_now() - t0;
+        double t_floor = cm_now() - t0, c_floor = cpu_now() - c0;
         int nn, nt;
         fem_mesh_size(m, &nn, &nt);
-        fprintf(fp, "%s,%g,%d,%d,%.6f,%d,%.3f,%.4f,%.4g\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes,
-                t_floor, 1e3 * blocks[2], st.dt_limit);
+        char rescol[32];
+        if (layers)
+            snprintf(rescol, sizeof rescol, "%g/%d", res, layers);
+        else
+            snprintf(rescol, sizeof rescol, "%g", res);
+        fprintf(fp, "%s%s,%s,%d,%d,%.6f,%d,%.3f,%.3f,%d,%d,%.4f,%.4g\n", el, refactor ? "_refactor" : "", rescol, nn, nt,
+                1e3 * r.deflection, r.contact_nodes, t_floor, c_floor, r.solves, r.columns, 1e3 * blocks[2],
+                st.dt_limit);
         fflush(fp);
-        printf("%s res %g: %d nodes, %d tets: deflection %.4f mm (%d nodes touch, %d solves, %.1f s); step %.3f ms, "
-               "limit %.3g s\n", el, res, nn, nt, 1e3 * r.deflection, r.contact_nodes, r.solves, t_floor,
+        printf("%s res %s: %d nodes, %d tets: deflection %.6f mm (%d nodes touch, %d passes, %d columns, %.1f s, "
+               "%.1f s CPU; the inflated tire's lowest point z = %.6f mm); step %.3f ms, limit %.3g s\n", el, rescol, nn,
+               nt, 1e3 * r.deflection, r.contact_nodes, r.solves, r.columns, t_floor, c_floor, 1e3 * r.z_free,
                1e3 * blocks[2], st.dt_limit);
         fflush(stdout);
         fem_destroy(&m);

@@ -889,6 +889,104 @@ static fem_config small_tire_config(fem_integrator integ)
     return c;
 }
 
+/* Integer resolutions mesh the same tire (uniform refinement): the lug
+ * tops' extent across the tread (the centre groove's edge and the
+ * shoulder) and their share of the circumference are the same at 1 and 2,
+ * so that a quantity converges under refinement instead of following a
+ * changing geometry (the groove was two cells at every resolution: a
+ * quarter of the crown at 1, an eighth at 2, half at 0.5). */
+static int tire_mesher_same_tire(void)
+{
+    double ymin[2], ymax[2], share[2];
+    for (int k = 0; k < 2; k++) {
+        fem_tire_def d = fem_tire_def_default();
+        d.resolution = k + 1.0;
+        fem_mesh m;
+        cm_error err = {0};
+        ENSURE(fem_mesh_tire(&d, &m, &err) == CM_OK);
+        /* lug-top nodes: on the outer radius; ymin: the groove's edge (smallest |y|), ymax: the widest */
+        ymin[k] = INFINITY, ymax[k] = 0.0;
+        for (int n = 0; n < m.n_nodes; n++) {
+            const double *x = &m.x[3 * n];
+            if (fabs(sqrt(x[0] * x[0] + x[2] * x[2]) - d.outer_radius) < 1e-9) {
+                ymin[k] = fmin(ymin[k], fabs(x[1]));
+                ymax[k] = fmax(ymax[k], fabs(x[1]));
+            }
+        }
+        /* share of the crown line y = +ymin.. covered by lug tops: the outer-radius faces' area over the
+         * band's (the chords' cosine cancels between the two: both on the same polygon) */
+        double a_top = 0.0;
+        for (int f = 0; f < m.n_faces; f++) {
+            const int32_t *t = &m.faces[3 * f];
+            int on = 1;
+            for (int q = 0; q < 3; q++) {
+                const double *x = &m.x[3 * t[q]];
+                on &= fabs(sqrt(x[0] * x[0] + x[2] * x[2]) - d.outer_radius) < 1e-9;
+            }
+            if (on) {
+                const double *a = &m.x[3 * t[0]], *b = &m.x[3 * t[1]], *c = &m.x[3 * t[2]];
+                double e1[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, e2[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+                double cr[3] = {e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2],
+                                e1[0] * e2[1] - e1[1] * e2[0]};
+                a_top += 0.5 * sqrt(cr[0] * cr[0] + cr[1] * cr[1] + cr[2] * cr[2]);
+            }
+        }
+        share[k] = a_top / (2.0 * M_PI * d.outer_radius * 2.0 * (ymax[k] - ymin[k]));
+        printf("  tire res %d: lug tops from |y| = %.6f to %.6f m, %.4f of that band\n", k + 1, ymin[k], ymax[k],
+               share[k]);
+        fem_mesh_free(&m);
+    }
+    ENSURE_NEAR(ymin[1], ymin[0], 1e-12);
+    ENSURE_NEAR(ymax[1], ymax[0], 1e-12);
+    ENSURE_REL(share[1], share[0], 2e-3); /* the polygon's chords: 1 - cos(pi / n_theta) */
+    ENSURE(share[0] > 0.49 && share[0] < 0.501); /* lug_fraction 0.5 */
+    return 0;
+}
+
+/* fem.mesh.layers: the cells through the wall and through the lugs, read
+ * from the scene (0..64), independent of the resolution; the same tire
+ * (its volume within the chords' 1e-3) with three layers each instead of
+ * one. */
+static int tire_mesher_layers(void)
+{
+    const char *text = "fem = {\n  mesh = { type = \"tire\"; resolution = 0.25; layers = 3; };\n"
+                       "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n};\n";
+    static const char *const sections[] = {"fem", NULL};
+    cm_scene *s;
+    cm_error err = {0};
+    ENSURE(cm_scene_open_string(text, "t.cfg", &s, &err) == CM_OK);
+    fem_config c = fem_config_default();
+    ENSURE_MSG(fem_config_read(s, &c, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(cm_scene_check_unknown(s, sections, &err) == CM_OK, "%s", err.msg);
+    ENSURE(c.tire.layers == 3 && c.tire.resolution == 0.25);
+    cm_scene_close(&s);
+    double vol[2];
+    int kmax[2];
+    for (int k = 0; k < 2; k++) {
+        fem_tire_def d = c.tire;
+        d.layers = k ? 3 : 0;
+        fem_mesh m;
+        ENSURE_MSG(fem_mesh_tire(&d, &m, &err) == CM_OK, "%s", err.msg);
+        fem_mesh_measure(&m, NULL, &vol[k]);
+        kmax[k] = 0;
+        for (int n = 0; n < m.n_nodes; n++)
+            kmax[k] = m.node_ijk[3 * n + 2] > kmax[k] ? m.node_ijk[3 * n + 2] : kmax[k];
+        fem_mesh_free(&m);
+    }
+    printf("  resolution 0.25: %d node layers (default), %d with layers = 3; volume %.6f / %.6f m^3\n", kmax[0] + 1,
+           kmax[1] + 1, vol[0], vol[1]);
+    ENSURE(kmax[0] == 2 && kmax[1] == 6);
+    ENSURE_REL(vol[1], vol[0], 1e-3);
+    const char *bad = "fem = {\n  mesh = { type = \"tire\"; layers = -1; };\n"
+                      "  material = { E = 20.0e6; nu = 0.45; rho = 1100.0; };\n  integrator = \"rigid\"; dt = 1e-5;\n};\n";
+    ENSURE(cm_scene_open_string(bad, "bad.cfg", &s, &err) == CM_OK);
+    c = fem_config_default();
+    ENSURE(fem_config_read(s, &c, &err) != CM_OK);
+    ENSURE_MSG(strstr(err.msg, "fem.mesh.layers"), "%s", err.msg);
+    cm_scene_close(&s);
+    return 0;
+}
+
 static int interface_and_wheel(void)
 {
     fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
@@ -1336,6 +1434,136 @@ static int floor_tire_balance(void)
     return 0;
 }
 
+/* The floor's influence method (K factorized once, the held nodes through
+ * the dense system of their influence matrix) against the reference that
+ * holds the nodes in K and refactorizes every pass, on the small tire with
+ * both elements: at a fixed height the same active set, reactions and
+ * displacement field to 1e-9 relative; with the load searched (tet4) the
+ * same height to the search's tolerance (1e-6 of the load), with one
+ * factorization instead of one per pass. */
+static int floor_influence_matches_refactor(void)
+{
+    for (int el = 0; el < 2; el++) {
+        fem_floor_result r[2], rh[2];
+        double *u[2] = {NULL, NULL};
+        int nd = 0;
+        for (int ref = 0; ref < 2; ref++) {
+            fem_config c = small_tire_config(FEM_INTEGRATOR_RIGID);
+            c.element = el ? FEM_ELEMENT_TET10 : FEM_ELEMENT_TET4;
+            c.gravity[2] = 0.0;
+            c.floor = true;
+            c.floor_set = FEM_SET_CONTACT;
+            c.floor_load = 400.0;
+            c.floor_refactor = ref;
+            fem_model *m;
+            cm_error err = {0};
+            if (ref == 0 || el == 0) { /* the reference's search on tet10 takes a minute: tet4 only */
+                ENSURE(fem_create(&c, &m, &err) == CM_OK);
+                ENSURE_MSG(fem_floor_static(m, &r[ref], &err) == CM_OK, "%s", err.msg);
+                fem_destroy(&m);
+            } else {
+                r[1] = r[0];
+                r[1].factorizations = r[1].solves, r[1].columns = 0;
+            }
+            /* at the height the influence method found, fixed */
+            c.floor_load = 0.0;
+            c.floor_height = r[0].height;
+            ENSURE(fem_create(&c, &m, &err) == CM_OK);
+            ENSURE_MSG(fem_floor_static(m, &rh[ref], &err) == CM_OK, "%s", err.msg);
+            nd = m->s->n_dof;
+            u[ref] = malloc((size_t)nd * sizeof *u[ref]);
+            ENSURE(u[ref]);
+            memcpy(u[ref], m->s->u, (size_t)nd * sizeof *u[ref]);
+            fem_destroy(&m);
+        }
+        double du = 0.0, umax = 0.0;
+        for (int d = 0; d < nd; d++) {
+            du = fmax(du, fabs(u[0][d] - u[1][d]));
+            umax = fmax(umax, fabs(u[1][d]));
+        }
+        printf("  %s, 400 N: influence %.9f mm (%d nodes, %d passes, %d factorization, %d columns), reference "
+               "%.9f mm (%d nodes, %d factorizations); at a fixed height: reaction %.9g / %.9g N, max |du| / max |u| "
+               "= %.2g\n", el ? "tet10" : "tet4", 1e3 * r[0].deflection, r[0].contact_nodes, r[0].solves,
+               r[0].factorizations, r[0].columns, 1e3 * r[1].deflection, r[1].contact_nodes, r[1].factorizations,
+               rh[0].reaction, rh[1].reaction, du / umax);
+        free(u[0]);
+        free(u[1]);
+        ENSURE(r[0].factorizations == 1 && r[1].factorizations == r[1].solves && r[1].columns == 0);
+        ENSURE(rh[0].factorizations == 1 && rh[1].factorizations == rh[1].solves && rh[1].solves > 1);
+        ENSURE(r[0].columns >= r[0].contact_nodes && r[0].contact_nodes >= 3);
+        ENSURE(rh[0].contact_nodes == rh[1].contact_nodes);
+        ENSURE_REL(rh[0].reaction, rh[1].reaction, 1e-9);
+        ENSURE_NEAR(rh[0].max_below, rh[1].max_below, 1e-9 * umax);
+        ENSURE(du <= 1e-9 * umax);
+        ENSURE_REL(r[0].deflection, r[1].deflection, 2e-6);
+        ENSURE(r[0].contact_nodes == r[1].contact_nodes);
+    }
+    return 0;
+}
+
+/* The floor's solve converges under uniform refinement, on a body with a
+ * closed form: a cantilever L x W x H = 200 x 20 x 20 mm (E 10 MPa,
+ * nu 0.3) clamped at x = 0 (the whole end face, xyz), a tip load P =
+ * 0.1 N down (a uniform traction on x = L) and the floor d = 1 mm below
+ * its bottom: the tip comes down by more than d (Timoshenko: P L^3 / 3EI +
+ * P L / kGA = 2.015 mm), so the floor carries R = P (1 - d / delta) at the
+ * tip's bottom edge (the deflection grows monotonically to the tip: no
+ * other node touches). tet10 on 1, 2, 4 cells through the thickness
+ * (10 x 1 x 1 ... 40 x 4 x 4 cells, 6 tets each): the differences shrink
+ * with an observed order above 1, and the Richardson extrapolate is within
+ * 2 % of Timoshenko's R (the clamped end face holds the Poisson
+ * contraction, a 3D effect beam theory does not have). */
+static int floor_cantilever_converges(void)
+{
+    const double L = 0.2, W = 0.02, H = 0.02, E = 1e7, nu = 0.3, P = 0.1, d = 1e-3;
+    const double I = W * H * H * H / 12.0, G = E / (2.0 * (1.0 + nu)), kappa = 10.0 * (1.0 + nu) / (12.0 + 11.0 * nu);
+    const double delta = P * L * L * L / (3.0 * E * I) + P * L / (kappa * G * W * H), R_beam = P * (1.0 - d / delta);
+    double R[3];
+    for (int k = 0; k < 3; k++) {
+        int n = 1 << k;
+        fem_config c = fem_config_default();
+        c.mesh = FEM_MESH_BOX;
+        c.element = FEM_ELEMENT_TET10;
+        c.box_size[0] = L, c.box_size[1] = W, c.box_size[2] = H;
+        c.box_cells[0] = 10 * n, c.box_cells[1] = c.box_cells[2] = n;
+        c.E = E;
+        c.nu = nu;
+        c.pressure = 0.0;
+        c.gravity[2] = 0.0;
+        c.integrator = FEM_INTEGRATOR_RIGID;
+        c.n_supports = 1;
+        c.supports[0] = (fem_support){.set = FEM_SET_XMIN, .fix = {true, true, true}};
+        c.n_loads = 1;
+        c.loads[0] = (fem_load){.set = FEM_SET_XMAX, .type = FEM_LOAD_FORCE, .value = {0.0, 0.0, -P}};
+        c.floor = true;
+        c.floor_set = FEM_SET_ZMIN;
+        c.floor_height = -d;
+        fem_model *m;
+        cm_error err = {0};
+        fem_floor_result r;
+        ENSURE(fem_create(&c, &m, &err) == CM_OK);
+        ENSURE_MSG(fem_floor_static(m, &r, &err) == CM_OK, "%s", err.msg);
+        double xmin = INFINITY; /* the held nodes: at the tip */
+        for (int q = 0; q < m->mesh.n_nodes; q++)
+            if (m->s->fixed[3 * q + 2] && !m->s->fixed[3 * q])
+                xmin = fmin(xmin, m->mesh.x[3 * q]);
+        printf("  %d cell(s) through: floor reaction %.8f N on %d nodes (from x = %.4f m), the free tip at z = %.5f "
+               "mm, %d passes\n", n, r.reaction, r.contact_nodes, xmin, 1e3 * r.z_free, r.solves);
+        ENSURE(r.factorizations == 1 && r.max_below <= 1e-12);
+        ENSURE(xmin > L - 1e-9);
+        R[k] = r.reaction;
+        fem_destroy(&m);
+    }
+    double p = log(fabs(R[1] - R[0]) / fabs(R[2] - R[1])) / log(2.0);
+    double R_ext = R[2] + (R[2] - R[1]) / (pow(2.0, p) - 1.0);
+    printf("  observed order %.2f, extrapolated R %.8f N; Timoshenko %.8f N (%+.2f %%)\n", p, R_ext, R_beam,
+           100.0 * (R_ext / R_beam - 1.0));
+    ENSURE(fabs(R[2] - R[1]) < fabs(R[1] - R[0]));
+    ENSURE(p > 1.0);
+    ENSURE_REL(R_ext, R_beam, 0.02);
+    return 0;
+}
+
 /* fem.floor's keys: read from a scene, exactly one of height and load,
  * the set named, a misspelt key refused by the strict check. */
 static int floor_keys_checked(void)
@@ -1746,6 +1974,8 @@ int main(int argc, char **argv)
         {"gmsh_malformed", gmsh_malformed},
         {"gmsh_roundtrip_tire", gmsh_roundtrip_tire},
         {"tire_mesher", tire_mesher},
+        {"tire_mesher_same_tire", tire_mesher_same_tire},
+        {"tire_mesher_layers", tire_mesher_layers},
         {"interface_and_wheel", interface_and_wheel},
         {"rim_reaction_balances_loads", rim_reaction_balances_loads},
         {"subcycling", subcycling},
@@ -1755,6 +1985,8 @@ int main(int argc, char **argv)
         {"interface_mass_scaling", interface_mass_scaling},
         {"floor_block_closed_form", floor_block_closed_form},
         {"floor_tire_balance", floor_tire_balance},
+        {"floor_influence_matches_refactor", floor_influence_matches_refactor},
+        {"floor_cantilever_converges", floor_cantilever_converges},
         {"floor_keys_checked", floor_keys_checked},
         {"scene_file_reads", scene_file_reads},
         {"output_files", output_files},

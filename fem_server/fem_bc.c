@@ -240,6 +240,21 @@ static int floor_oom(cm_error *err)
  * the plane and loses the held nodes the plane pulls (K u - b < 0 in z),
  * until neither happens. Frictionless: only z is held. Each pass
  * refactorizes K_ff (CHOLMOD), or runs CG. */
+/* The converged active set's result (both methods). */
+static void floor_result_fill(const floor_ctx *c, double height, double reaction, double below, int held, int columns,
+                              fem_floor_result *res)
+{
+    res->height = height;
+    res->deflection = height - c->zmin;
+    res->z_free = c->zmin;
+    res->reaction = reaction;
+    res->max_below = below;
+    res->contact_nodes = held;
+    res->solves = c->solves;
+    res->factorizations = c->factorizations;
+    res->columns = columns;
+}
+
 static int floor_solve_refactor(floor_ctx *c, double height, fem_floor_result *res, cm_error *err)
 {
     fem_model *m = c->m;
@@ -292,15 +307,7 @@ static int floor_solve_refactor(floor_ctx *c, double height, fem_floor_result *r
         if (!changed) {
             fem_solver_set_state(s, s->u, NULL);
             m->static_done = true;
-            res->height = height;
-            res->deflection = height - c->zmin;
-            res->z_free = c->zmin;
-            res->reaction = reaction;
-            res->max_below = below;
-            res->contact_nodes = held;
-            res->solves = c->solves;
-            res->factorizations = c->factorizations;
-            res->columns = 0;
+            floor_result_fill(c, height, reaction, below, held, 0, res);
             return CM_OK;
         }
     }
@@ -476,15 +483,7 @@ static int floor_solve_influence(floor_ctx *c, double height, fem_floor_result *
             }
         }
         if (!changed) {
-            res->height = height;
-            res->deflection = height - c->zmin;
-            res->z_free = c->zmin;
-            res->reaction = reaction;
-            res->max_below = below;
-            res->contact_nodes = held;
-            res->solves = c->solves;
-            res->factorizations = c->factorizations;
-            res->columns = c->n_col;
+            floor_result_fill(c, height, reaction, below, held, c->n_col, res);
             return CM_OK;
         }
     }

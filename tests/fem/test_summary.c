@@ -172,6 +172,19 @@ static int read_summary_attr(const char *dir, const char *name, char *buf, size_
     return 0;
 }
 
+/* dir/summary.json into buf (as text). */
+static int read_summary_json(const char *dir, char *buf, size_t len)
+{
+    char jpath[256];
+    snprintf(jpath, sizeof jpath, "%s/summary.json", dir);
+    FILE *jf = fopen(jpath, "r");
+    ENSURE(jf);
+    size_t got = fread(buf, 1, len - 1, jf);
+    fclose(jf);
+    buf[got] = '\0';
+    return 0;
+}
+
 static int summary_of_synthetic_run(void)
 {
     char dir[] = "/tmp/fem_summary_XXXXXX";
@@ -232,13 +245,8 @@ static int summary_of_synthetic_run(void)
     ENSURE_MSG(conv[3][6] / conv[0][6] > 0.3 && conv[3][6] / conv[0][6] < 0.75, "quarter %g, all %g", conv[0][6],
                conv[3][6]);
     /* summary.json beside it says the same */
-    char jpath[256], buf[8192];
-    snprintf(jpath, sizeof jpath, "%s/summary.json", dir);
-    FILE *jf = fopen(jpath, "r");
-    ENSURE(jf);
-    size_t got = fread(buf, 1, sizeof buf - 1, jf);
-    fclose(jf);
-    buf[got] = '\0';
+    char buf[8192];
+    ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
     ENSURE(strstr(buf, "\"T_P_per_W\"") && strstr(buf, "\"warnings\": [\"the steady load is 150"));
     /* on target: no warning */
     d.target_load = 150.0;
@@ -269,13 +277,8 @@ static int summary_sinkage_drift(void)
     printf("  %s\n", drift);
     ENSURE_MSG(warn[0] == '\0', "%s", warn);
     ENSURE_MSG(strstr(drift, "not steady") && strstr(drift, "sinking"), "%s", drift);
-    char jpath[256], buf[8192];
-    snprintf(jpath, sizeof jpath, "%s/summary.json", dir);
-    FILE *jf = fopen(jpath, "r");
-    ENSURE(jf);
-    size_t got = fread(buf, 1, sizeof buf - 1, jf);
-    fclose(jf);
-    buf[got] = '\0';
+    char buf[8192];
+    ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
     ENSURE(strstr(buf, "\"warnings\": [\"the sinkage is not steady"));
     snprintf(buf, sizeof buf, "rm -rf %s", dir);
     ENSURE(system(buf) == 0);

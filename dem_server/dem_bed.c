@@ -224,7 +224,7 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
     return rc;
 }
 
-static int add_box_walls(dem_world *w, const dem_bed_params *p, cm_error *err)
+int dem_bed_add_walls(dem_world *w, const dem_bed_params *p, cm_error *err)
 {
     const double *lo = p->box_min, *hi = p->box_max;
     double pts[5][3] = {{lo[0], lo[1], lo[2]}, {lo[0], lo[1], lo[2]}, {hi[0], hi[1], lo[2]}, {lo[0], lo[1], lo[2]},
@@ -239,23 +239,6 @@ static int add_box_walls(dem_world *w, const dem_bed_params *p, cm_error *err)
     return CM_OK;
 }
 
-/* Sets every pair's sliding friction to mu and its rolling resistance to 0
- * (settle_friction), keeping the materials' coefficients in `keep`; with
- * keep NULL restores them from `from`. */
-static void settle_coefficients(dem_world *w, double mu, dem_pair_coef (*keep)[DEM_MAX_MATERIALS],
-                                const dem_pair_coef (*from)[DEM_MAX_MATERIALS])
-{
-    for (int a = 0; a < w->n_mat; a++)
-        for (int b = 0; b < w->n_mat; b++) {
-            dem_pair_coef *c = &w->coef[a][b];
-            if (keep) {
-                keep[a][b] = *c;
-                c->mu = mu, c->mu_roll = 0.0;
-            } else
-                c->mu = from[a][b].mu, c->mu_roll = from[a][b].mu_roll;
-        }
-}
-
 int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, cm_error *err)
 {
     double dt_run = w->def.dt;
@@ -263,9 +246,14 @@ int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, v
         w->def.dt = p->settle_dt;
         w->prepared = 0;
     }
+    /* settle_friction: every pair lubricated while settling, the
+     * materials' coefficients back afterwards */
+    const int lubricated = p->settle_friction >= 0.0;
     dem_pair_coef kept[DEM_MAX_MATERIALS][DEM_MAX_MATERIALS];
-    if (p->settle_friction >= 0.0)
-        settle_coefficients(w, p->settle_friction, kept, NULL);
+    memcpy(kept, w->coef, sizeof kept);
+    for (int a = 0; lubricated && a < w->n_mat; a++)
+        for (int b = 0; b < w->n_mat; b++)
+            w->coef[a][b].mu = p->settle_friction, w->coef[a][b].mu_roll = 0.0;
     int rc = CM_OK;
     double ke_grain = INFINITY;
     double t_start = w->time;
@@ -296,8 +284,8 @@ int dem_bed_settle(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, v
     if (rc == CM_OK)
         cm_log_info("bed settled: %d grains, t = %.4f s (%ld steps), KE/grain = %.3g J", w->g.n, w->time - t_start,
                     w->step, ke_grain);
-    if (p->settle_friction >= 0.0)
-        settle_coefficients(w, 0.0, NULL, (const dem_pair_coef(*)[DEM_MAX_MATERIALS])kept);
+    if (lubricated)
+        memcpy(w->coef, kept, sizeof kept);
     /* the settled state is the start of a run: at rest, clock at zero */
     for (int i = 0; i < w->g.n; i++)
         w->g.vx[i] = w->g.vy[i] = w->g.vz[i] = w->g.wx[i] = w->g.wy[i] = w->g.wz[i] = 0.0;
@@ -493,7 +481,7 @@ static int bed_code_fingerprint(const dem_world *w, const dem_bed_params *p, uin
     dem_world *s = NULL;
     int rc = dem_world_create(&def, w->n_mat, w->mat, &s, err);
     if (rc == CM_OK)
-        rc = add_box_walls(s, &m, err);
+        rc = dem_bed_add_walls(s, &m, err);
     if (rc == CM_OK)
         rc = dem_bed_place(s, &m, err);
     for (int k = 0; k < 300 && rc == CM_OK; k++)
@@ -690,7 +678,7 @@ static int bed_settle_scratch(dem_world *w, const dem_bed_params *p, dem_bed_pro
 int dem_bed_build(dem_world *w, const dem_bed_params *p, dem_bed_progress cb, void *user, bool *loaded, cm_error *err)
 {
     *loaded = false;
-    int rc = add_box_walls(w, p, err);
+    int rc = dem_bed_add_walls(w, p, err);
     if (rc)
         return rc;
     if (p->file[0] && access(p->file, R_OK) == 0) {

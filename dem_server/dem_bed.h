@@ -64,6 +64,9 @@ typedef int (*dem_bed_progress)(dem_world *w, void *user);
 int dem_bed_build(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user, bool *loaded,
                   cm_error *err);
 /* The pieces, for tests. */
+/* The floor at box_min[2] and, with side_walls, the four walls at the box's
+ * x and y limits, of wall_material (as dem_bed_build adds them). */
+int dem_bed_add_walls(dem_world *w, const dem_bed_params *params, cm_error *err);
 int dem_bed_place(dem_world *w, const dem_bed_params *params, cm_error *err);
 int dem_bed_settle(dem_world *w, const dem_bed_params *params, dem_bed_progress cb, void *user,
                    cm_error *err);

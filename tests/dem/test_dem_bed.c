@@ -35,6 +35,18 @@ static dem_bed_params small_bed(int count)
     return p;
 }
 
+/* A name for a bed cache from a mkstemp template (the file made and removed
+ * again, so that the test's first build settles and saves). */
+static int fresh_path(char *tmpl)
+{
+    int fd = mkstemp(tmpl);
+    if (fd < 0)
+        return -1;
+    close(fd);
+    unlink(tmpl);
+    return 0;
+}
+
 static dem_world *bed_world(int max_grains, int threads)
 {
     dem_material m = soil();
@@ -136,10 +148,7 @@ static int determinism(void)
 static int bed_cache(void)
 {
     char path[] = "/tmp/dem_bed_test_XXXXXX";
-    int fd = mkstemp(path);
-    ENSURE(fd >= 0);
-    close(fd);
-    unlink(path);
+    ENSURE(fresh_path(path) == 0);
     dem_bed_params p = small_bed(200);
     p.settle_min_time = 0.02;
     p.settle_ke = 1e-6;
@@ -191,10 +200,7 @@ static int bed_cache(void)
 static int settled_equals_cached(void)
 {
     char path[] = "/tmp/dem_bed_same_XXXXXX";
-    int fd = mkstemp(path);
-    ENSURE(fd >= 0);
-    close(fd);
-    unlink(path);
+    ENSURE(fresh_path(path) == 0);
     dem_bed_params p = small_bed(200);
     p.settle_min_time = 0.02;
     p.settle_ke = 1e-6;
@@ -379,19 +385,6 @@ static int config_read(void)
     return 0;
 }
 
-/* The bed's floor and side walls (as dem_bed_build adds them), material 0. */
-static int add_box_walls_for_test(dem_world *w, const dem_bed_params *p, cm_error *err)
-{
-    const double *lo = p->box_min, *hi = p->box_max;
-    double pts[5][3] = {{lo[0], lo[1], lo[2]}, {lo[0], lo[1], lo[2]}, {hi[0], hi[1], lo[2]}, {lo[0], lo[1], lo[2]},
-                        {hi[0], hi[1], lo[2]}};
-    double nrm[5][3] = {{0, 0, 1}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}};
-    for (int k = 0; k < 5; k++)
-        if (dem_wall_add(w, pts[k], nrm[k], 0, err))
-            return -1;
-    return 0;
-}
-
 /* dem.bed.settle_friction: a bed settled with lubricated grains (friction 0,
  * no rolling resistance) packs denser than one settled with the material's
  * friction 0.5 (random close against random loose packing: the mean surface
@@ -406,10 +399,7 @@ static int add_box_walls_for_test(dem_world *w, const dem_bed_params *p, cm_erro
 static int settle_friction(void)
 {
     char path[] = "/tmp/dem_bed_lube_XXXXXX";
-    int fd = mkstemp(path);
-    ENSURE(fd >= 0);
-    close(fd);
-    unlink(path);
+    ENSURE(fresh_path(path) == 0);
     dem_bed_params p = small_bed(400);
     p.settle_min_time = 0.05;
     p.settle_ke = 1e-8;
@@ -431,7 +421,7 @@ static int settle_friction(void)
     ENSURE(hb < 0.97 * ha);
     ENSURE(dem_world_hash(b) == dem_world_hash(c));
     /* the settling itself, without the cache's scratch world */
-    ENSURE(add_box_walls_for_test(e, &q, &err) == 0 && dem_bed_place(e, &q, &err) == 0);
+    ENSURE(dem_bed_add_walls(e, &q, &err) == 0 && dem_bed_place(e, &q, &err) == 0);
     ENSURE_MSG(dem_bed_settle(e, &q, NULL, NULL, &err) == 0, "%s", err.msg);
     const double w0 = 20.0;
     int n = dem_grain_count(e);

@@ -3,7 +3,7 @@
 travel rows of one run's traction.csv binned by the realised slip, each bin's
 traction per its own load.
 
-usage: bench/post/ramp.py RUN_DIR [--bins N] [--out PREFIX]
+usage: bench/post/ramp.py RUN_DIR [--bins N] [--out PREFIX] [--fixed SWEEP.csv ...]
 
 Per bin of realised slip (equal widths over the ramp's range): the mean
 slip, the mean vertical load W (Fz) and T_H/W, T_R/W, T_P/W (the means of
@@ -12,7 +12,12 @@ and the number of rows. Writes PREFIX.csv and PREFIX.png (default
 RUN_DIR/ramp). The curve lags the steady (fixed-slip) one by about
 K L ds/dx, K the slope dF/ds and L the distance the soil needs to build up
 its force (test_drive.slip_ramp_lag): compare a ramp with fixed-slip runs
-before trusting it, and ramp slower where they differ."""
+before trusting it, and ramp slower where they differ.
+
+--fixed: bench/slip_sweep CSVs of fixed-slip runs (same scene and beds) to
+compare with: their points (with their 95 % intervals) go on the chart, and
+PREFIX-vs-fixed.csv holds, per fixed-slip run, the ramp's curve at that slip
+(linear between bin means) and the differences in units of the load."""
 import argparse
 import csv
 import os
@@ -51,11 +56,45 @@ def ramp_curve(tr, bins=10):
     return {k: np.array(v) for k, v in out.items()}
 
 
+def fixed_points(paths):
+    """The ok rows of slip_sweep CSVs: slip (fraction), T_H/W, T_R/W, T_P/W
+    with their 95 % half-widths, sinkage (mm) and its half-width, source."""
+    rows = []
+    for path in paths:
+        with open(path) as f:
+            for r in csv.DictReader(f):
+                if r["status"] != "ok":
+                    continue
+                row = {"slip": float(r["slip_percent"]) / 100, "tire": r["tire"], "source": os.path.basename(path),
+                       "sinkage_mm": 1e3 * float(r["sinkage_mean_m"]), "sinkage_ci": 1e3 * float(r["sinkage_ci95_m"])}
+                for k in ("TH_W", "TR_W", "TP_W"):
+                    name = "T_%s_per_W" % k[1]
+                    row[k], row[k + "_ci"] = float(r[name]), float(r[name + "_ci95"])
+                rows.append(row)
+    return rows
+
+
+def compare(c, fixed):
+    """Per fixed-slip point inside the ramp's range: the ramp's value there
+    (linear between bin means) and ramp - fixed, per quantity."""
+    out = []
+    for f in fixed:
+        if not (c["slip"].min() <= f["slip"] <= c["slip"].max()):
+            continue
+        row = {"source": f["source"], "tire": f["tire"], "slip": f["slip"]}
+        for k in ("TH_W", "TR_W", "TP_W", "sinkage_mm"):
+            ramp = float(np.interp(f["slip"], c["slip"], c[k]))
+            row["ramp_" + k], row["fixed_" + k], row["diff_" + k] = ramp, f[k], ramp - f[k]
+        out.append(row)
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run")
     ap.add_argument("--bins", type=int, default=10)
     ap.add_argument("--out")
+    ap.add_argument("--fixed", nargs="*", default=[])
     a = ap.parse_args()
     prefix = a.out or os.path.join(a.run, "ramp")
     c = ramp_curve(runio.read_traction(os.path.join(a.run, "traction.csv")), a.bins)
@@ -65,16 +104,35 @@ def main():
         w.writerow(cols)
         for i in range(len(c["slip"])):
             w.writerow(["%.6g" % c[k][i] for k in cols])
+    fixed = fixed_points(a.fixed)
+    diffs = compare(c, fixed)
+    if diffs:
+        with open(prefix + "-vs-fixed.csv", "w") as f:
+            w = csv.DictWriter(f, fieldnames=list(diffs[0].keys()))
+            w.writeheader()
+            for d in diffs:
+                w.writerow({k: ("%.6g" % v if isinstance(v, float) else v) for k, v in d.items()})
+        for d in diffs:
+            print("slip %4.1f %% (%s, %s): ramp - fixed T_P/W %+.3f, T_H/W %+.3f, sinkage %+.1f mm" %
+                  (100 * d["slip"], d["source"], d["tire"], d["diff_TP_W"], d["diff_TH_W"], d["diff_sinkage_mm"]))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(6, 6), sharex=True)
     for k, lab in (("TH_W", "T_H/W"), ("TR_W", "T_R/W"), ("TP_W", "T_P/W")):
-        ax.plot(100 * c["slip"], c[k], "o-", ms=3, label=lab)
+        line, = ax.plot(100 * c["slip"], c[k], "o-", ms=3, label=lab + " (ramp)")
+        if fixed:
+            ax.errorbar([100 * f["slip"] for f in fixed], [f[k] for f in fixed], yerr=[f[k + "_ci"] for f in fixed],
+                        fmt="s", ms=5, mfc="none", color=line.get_color(), capsize=2,
+                        label=lab + " (fixed slip, 95 %)")
     ax.axhline(0, color="0.6", lw=0.5)
     ax.set_ylabel("traction per actual load")
     ax.legend(fontsize=8)
-    bx.plot(100 * c["slip"], c["sinkage_mm"], "o-", ms=3)
+    bx.plot(100 * c["slip"], c["sinkage_mm"], "o-", ms=3, label="ramp")
+    if fixed:
+        bx.errorbar([100 * f["slip"] for f in fixed], [f["sinkage_mm"] for f in fixed],
+                    yerr=[f["sinkage_ci"] for f in fixed], fmt="s", ms=5, mfc="none", capsize=2, label="fixed slip")
+        bx.legend(fontsize=8)
     bx.set_xlabel("realised slip (%)")
     bx.set_ylabel("sinkage (mm)")
     fig.suptitle("ramped slip: %s" % os.path.basename(os.path.abspath(a.run)), fontsize=9)

@@ -29,6 +29,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import runio  # noqa: E402
 
 TRAVEL = 1  # traction.csv's phase of the travel (runio.PHASE_NAMES)
+SLIP_TOL = 0.005  # a fixed slip this near the ramp's realised range counts as inside (its ends are reached only at the ends)
 
 
 def ramp_curve(tr, bins=10):
@@ -41,6 +42,7 @@ def ramp_curve(tr, bins=10):
     edges = np.linspace(s.min(), s.max(), bins + 1)
     idx = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, bins - 1)
     out = {k: [] for k in ("slip", "load", "TH_W", "TR_W", "TP_W", "sinkage_mm", "rows")}
+    out["range"] = [edges[0], edges[-1]]  # the realised slips the bins cover
     for b in range(bins):
         m = idx == b
         if not np.any(m):
@@ -75,13 +77,16 @@ def fixed_points(paths):
 
 
 def compare(c, fixed):
-    """Per fixed-slip point inside the ramp's range: the ramp's value there
-    (linear between bin means) and ramp - fixed, per quantity."""
+    """Per fixed-slip point inside the slips the ramp realised: the ramp's
+    value there (linear between bin means; between the outermost bin's mean
+    and the range's end, that bin's mean: end_bin says so, the value is then
+    up to half a bin's width of slip away) and ramp - fixed, per quantity."""
     out = []
     for f in fixed:
-        if not (c["slip"].min() <= f["slip"] <= c["slip"].max()):
+        if not (c["range"][0] - SLIP_TOL <= f["slip"] <= c["range"][1] + SLIP_TOL):
             continue
-        row = {"source": f["source"], "tire": f["tire"], "slip": f["slip"]}
+        end_bin = not (c["slip"].min() <= f["slip"] <= c["slip"].max())
+        row = {"source": f["source"], "tire": f["tire"], "slip": f["slip"], "end_bin": int(end_bin)}
         for k in ("TH_W", "TR_W", "TP_W", "sinkage_mm"):
             ramp = float(np.interp(f["slip"], c["slip"], c[k]))
             row["ramp_" + k], row["fixed_" + k], row["diff_" + k] = ramp, f[k], ramp - f[k]
@@ -99,7 +104,7 @@ def main():
     prefix = a.out or os.path.join(a.run, "ramp")
     c = ramp_curve(runio.read_traction(os.path.join(a.run, "traction.csv")), a.bins)
     cols = ["slip", "load", "TH_W", "TR_W", "TP_W", "sinkage_mm", "rows"]
-    with open(prefix + ".csv", "w") as f:
+    with open(prefix + ".csv", "w") as f:  # (the per-bin columns; not the range)
         w = csv.writer(f)
         w.writerow(cols)
         for i in range(len(c["slip"])):
@@ -113,8 +118,9 @@ def main():
             for d in diffs:
                 w.writerow({k: ("%.6g" % v if isinstance(v, float) else v) for k, v in d.items()})
         for d in diffs:
-            print("slip %4.1f %% (%s, %s): ramp - fixed T_P/W %+.3f, T_H/W %+.3f, sinkage %+.1f mm" %
-                  (100 * d["slip"], d["source"], d["tire"], d["diff_TP_W"], d["diff_TH_W"], d["diff_sinkage_mm"]))
+            print("slip %4.1f %% (%s, %s): ramp - fixed T_P/W %+.3f, T_H/W %+.3f, sinkage %+.1f mm%s" %
+                  (100 * d["slip"], d["source"], d["tire"], d["diff_TP_W"], d["diff_TH_W"], d["diff_sinkage_mm"],
+                   " (the end bin's mean)" if d["end_bin"] else ""))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -103,11 +103,14 @@ def compares_with_fixed():
         write_run(d)
         sweep = os.path.join(d, "slip_sweep-synthetic.csv")
         # two points off the law by a known amount, one failed run, one
-        # outside the ramp's range: only the first two are compared
-        write_sweep(sweep, [(0.2, "ok", 0.05), (0.4, "ok", -0.03), (0.3, "failed (exit 1)", 0.0), (0.8, "ok", 0.0)])
+        # outside the ramp's range, one inside it but beyond the last bin's
+        # mean: the first two are compared, and the last with end_bin set
+        write_sweep(sweep, [(0.2, "ok", 0.05), (0.4, "ok", -0.03), (0.3, "failed (exit 1)", 0.0), (0.8, "ok", 0.0),
+                            (0.595, "ok", 0.0)])
         c = ramp.ramp_curve(runio.read_traction(os.path.join(d, "traction.csv")), bins=14)
         diffs = ramp.compare(c, ramp.fixed_points([sweep]))
-        assert [round(x["slip"], 3) for x in diffs] == [0.2, 0.4], diffs
+        assert [round(x["slip"], 3) for x in diffs] == [0.2, 0.4, 0.595], diffs
+        assert [x["end_bin"] for x in diffs] == [0, 0, 1], diffs
         for x, off in zip(diffs, (0.05, -0.03)):
             for k in ("TH_W", "TR_W", "TP_W"):
                 assert abs(x["diff_" + k] + off) < 5e-3, (k, x)
@@ -116,7 +119,7 @@ def compares_with_fixed():
                             "--fixed", sweep], capture_output=True, text=True)
         assert p.returncode == 0, p.stderr
         with open(os.path.join(d, "ramp-vs-fixed.csv")) as f:
-            assert len(f.read().splitlines()) == 3, "ramp-vs-fixed.csv rows"
+            assert len(f.read().splitlines()) == 4, "ramp-vs-fixed.csv rows"
         print("  " + p.stdout.strip().replace("\n", "\n  "))
 
 

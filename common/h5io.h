@@ -170,6 +170,15 @@ long cm_h5_series_rows(const cm_h5_series *s);
  * Costs one copy of the kept data. */
 int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step, cm_h5 **out, cm_error *err);
 
+/* The rebuild cm_h5_reopen does, for any HDF5 file (dem_server's grain
+ * frames too): `path` is replaced by a copy of everything in it except the
+ * members of group `group` ("/" or "/steps") named <prefix><digits> with a
+ * number greater than keep, which are not even opened. A kept numbered
+ * member must be a group (whose attribute "step", if it has one, equals its
+ * number). Extendible datasets are copied up to the last chunk that reads.
+ * Written to "<path>.resume.tmp", synced and renamed over `path`. */
+int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long keep, cm_error *err);
+
 /* Reopens the series `path` of a reopened file, cut back to its first `rows`
  * rows, and its CSV (cut back to the header and `rows` lines). columns as
  * for cm_h5_series_create. Fails naming the file if either holds fewer rows. */

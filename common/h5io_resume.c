@@ -312,10 +312,88 @@ static int extendible(hid_t d)
     return rank == 1 && maxdims[0] == H5S_UNLIMITED;
 }
 
+/* The numbered members of one group that a rebuild filters (see
+ * cm_h5_rebuild). */
+typedef struct numbered {
+    const char *group, *prefix;
+    long keep;
+} numbered;
+
+/* The number in `name` when it is <prefix><digits>, else -1. */
+static long number_of(const char *name, const char *prefix)
+{
+    size_t lp = strlen(prefix), len = strlen(name);
+    if (strncmp(name, prefix, lp) != 0 || len == lp || len - lp > 18 || strspn(name + lp, "0123456789") != len - lp)
+        return -1;
+    return strtol(name + lp, NULL, 10);
+}
+
+/* Checks that object o, numbered member `number` of a group, kept by the
+ * checkpoint, is a group (with the step attribute `number` if it has one:
+ * a half-written name heap can pair a name with another object) and copies
+ * it into dst as `name`. */
+static int copy_kept(hid_t o, hid_t dst, const char *name, long number, const char *file, const char *shown,
+                     cm_error *err)
+{
+    int64_t s64 = -1;
+    if (o < 0)
+        return h5io_fail(err, file, "opening %s (kept by the checkpoint)", shown);
+    htri_t has = H5Iget_type(o) == H5I_GROUP ? H5Aexists(o, "step") : -1;
+    if (has < 0 || (has > 0 && (read_attr(o, "step", H5T_NATIVE_INT64, &s64) != 0 || s64 != number)))
+        return cm_fail(err, CM_ERR_PARSE, "%s: %s (kept by the checkpoint) is unreadable: not a group with the "
+                       "step attribute %ld", file, shown, number);
+    if (H5Ocopy(o, ".", dst, name, H5P_DEFAULT, H5P_DEFAULT) < 0)
+        return h5io_fail(err, file, "copying %s (kept by the checkpoint)", shown);
+    return CM_OK;
+}
+
+static int copy_object(hid_t src, hid_t dst, const char *name, const char *file, const char *shown,
+                       const numbered *num, cm_error *err);
+
+/* Copies the members of group src (path shown) into dst. In the filtered
+ * group, a numbered member after the checkpoint is skipped without being
+ * opened (a kill leaves those half written), and a kept one is opened by
+ * its place in the listing, not looked up by name (a symbol-table node
+ * written in its new state beside an old B-tree can list a name that the
+ * lookup no longer finds). A group that cannot be listed fails: a kill
+ * while one of its symbol-table nodes was split can leave its B-tree
+ * pointing to a node never written, which may hold kept members. */
+static int copy_members(hid_t src, hid_t dst, const char *file, const char *shown, const numbered *num,
+                        cm_error *err)
+{
+    names nm;
+    int rc = list_links(src, file, shown, &nm, err);
+    int filtered = num && strcmp(shown, num->group) == 0;
+    for (size_t i = 0; i < nm.n && rc == CM_OK; i++) {
+        size_t len = strlen(shown) + strlen(nm.v[i]) + 2;
+        char *sub = malloc(len);
+        if (!sub) {
+            rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", file);
+            break;
+        }
+        snprintf(sub, len, "%s/%s", strcmp(shown, "/") ? shown : "", nm.v[i]);
+        long k = filtered ? number_of(nm.v[i], num->prefix) : -1;
+        if (k > num->keep) {
+            /* after the checkpoint: not copied */
+        } else if (k >= 0) {
+            hid_t o = H5Oopen_by_idx(src, ".", H5_INDEX_NAME, H5_ITER_INC, (hsize_t)i, H5P_DEFAULT);
+            rc = copy_kept(o, dst, nm.v[i], k, file, sub, err);
+            if (o >= 0)
+                H5Oclose(o);
+        } else {
+            rc = copy_object(src, dst, nm.v[i], file, sub, num, err);
+        }
+        free(sub);
+    }
+    names_free(&nm);
+    return rc;
+}
+
 /* Copies object `name` of group src (path shown) into group dst: a group
  * member by member (attributes included), an extendible dataset by its
  * readable prefix, anything else whole with H5Ocopy. */
-static int copy_object(hid_t src, hid_t dst, const char *name, const char *file, const char *shown, cm_error *err)
+static int copy_object(hid_t src, hid_t dst, const char *name, const char *file, const char *shown,
+                       const numbered *num, cm_error *err)
 {
     hid_t o = H5Oopen(src, name, H5P_DEFAULT);
     if (o < 0)
@@ -323,26 +401,17 @@ static int copy_object(hid_t src, hid_t dst, const char *name, const char *file,
     H5I_type_t type = H5Iget_type(o);
     int rc = CM_OK;
     if (type == H5I_GROUP) {
-        hid_t g = H5Gcreate2(dst, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-        names nm;
-        if (g < 0)
+        hid_t g = H5I_INVALID_HID;
+        if (strcmp(shown, "/steps") == 0) /* as h5io creates it */
+            rc = h5io_create_steps_group(dst, file, err);
+        else if ((g = H5Gcreate2(dst, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT)) < 0)
             rc = h5io_fail(err, file, "creating the copy of %s", shown);
+        if (rc == CM_OK && g < 0 && (g = H5Gopen2(dst, name, H5P_DEFAULT)) < 0)
+            rc = h5io_fail(err, file, "opening the copy of %s", shown);
         if (rc == CM_OK)
             rc = copy_attrs(o, g, file, shown, err);
-        if (rc == CM_OK && (rc = list_links(o, file, shown, &nm, err)) == CM_OK) {
-            for (size_t i = 0; i < nm.n && rc == CM_OK; i++) {
-                size_t len = strlen(shown) + strlen(nm.v[i]) + 2;
-                char *sub = malloc(len);
-                if (!sub) {
-                    rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", file);
-                    break;
-                }
-                snprintf(sub, len, "%s/%s", strcmp(shown, "/") ? shown : "", nm.v[i]);
-                rc = copy_object(o, g, nm.v[i], file, sub, err);
-                free(sub);
-            }
-            names_free(&nm);
-        }
+        if (rc == CM_OK)
+            rc = copy_members(o, g, file, shown, num, err);
         if (g >= 0)
             H5Gclose(g);
     } else if (type == H5I_DATASET && extendible(o)) {
@@ -351,77 +420,6 @@ static int copy_object(hid_t src, hid_t dst, const char *name, const char *file,
         rc = h5io_fail(err, file, "copying %s", shown);
     }
     H5Oclose(o);
-    return rc;
-}
-
-/* The step a /steps member's name stands for (the writer's %06ld), or -1. */
-static long step_of_name(const char *name)
-{
-    size_t len = strlen(name);
-    if (len < 6 || len > 18 || strspn(name, "0123456789") != len)
-        return -1;
-    return strtol(name, NULL, 10);
-}
-
-/* Checks that object o (kept by the checkpoint) is the group of `step`
- * and copies it into dst as `name`. */
-static int copy_kept_step(hid_t o, hid_t dst, const char *name, long step, const char *file, cm_error *err)
-{
-    char shown[48];
-    snprintf(shown, sizeof shown, "/steps/%.30s", name);
-    int64_t s64 = -1;
-    if (o < 0)
-        return h5io_fail(err, file, "opening %s (kept by the checkpoint)", shown);
-    if (H5Iget_type(o) != H5I_GROUP || read_attr(o, "step", H5T_NATIVE_INT64, &s64) != 0 || s64 != step)
-        return cm_fail(err, CM_ERR_PARSE, "%s: %s (kept by the checkpoint) is unreadable: not a group with the "
-                       "step attribute %ld", file, shown, step);
-    if (H5Ocopy(o, ".", dst, name, H5P_DEFAULT, H5P_DEFAULT) < 0)
-        return h5io_fail(err, file, "copying %s (kept by the checkpoint)", shown);
-    return CM_OK;
-}
-
-/* /steps up to and including step `keep`: each kept group's own step
- * attribute must agree with its name (a half-written name heap can pair a
- * name with another object), and is then copied whole. A /steps that
- * cannot be listed at all fails the resume: a kill while one of its
- * symbol-table nodes was being split can leave the B-tree pointing to a
- * node never written, which holds kept steps too (looking them up by name,
- * with the step numbers from the XDMF, reaches the same missing node). */
-static int copy_steps(hid_t src_root, hid_t dst_root, const char *file, long keep, cm_error *err)
-{
-    hid_t src = H5Gopen2(src_root, "steps", H5P_DEFAULT);
-    if (src < 0)
-        return h5io_fail(err, file, "opening /steps");
-    hid_t dst = H5I_INVALID_HID;
-    names nm = {0};
-    int rc = h5io_create_steps_group(dst_root, file, err);
-    if (rc == CM_OK && (dst = H5Gopen2(dst_root, "steps", H5P_DEFAULT)) < 0)
-        rc = h5io_fail(err, file, "opening the copy of /steps");
-    if (rc == CM_OK)
-        rc = copy_attrs(src, dst, file, "/steps", err);
-    if (rc == CM_OK)
-        rc = list_links(src, file, "/steps", &nm, err);
-    for (size_t i = 0; i < nm.n && rc == CM_OK; i++) {
-        long step = step_of_name(nm.v[i]);
-        if (step > keep)
-            continue; /* after the checkpoint: possibly half written, never opened */
-        if (step < 0) {
-            rc = cm_fail(err, CM_ERR_PARSE, "%s: /steps/%.30s is not a step group (name not /steps/<step>)", file,
-                         nm.v[i]);
-            break;
-        }
-        /* Opened by its place in the listing, not looked up by name: a
-         * symbol table node written in its new state beside an old B-tree
-         * can list a name that the lookup no longer finds. */
-        hid_t g = H5Oopen_by_idx(src, ".", H5_INDEX_NAME, H5_ITER_INC, (hsize_t)i, H5P_DEFAULT);
-        rc = copy_kept_step(g, dst, nm.v[i], step, file, err);
-        if (g >= 0)
-            H5Oclose(g);
-    }
-    names_free(&nm);
-    if (dst >= 0)
-        H5Gclose(dst);
-    H5Gclose(src);
     return rc;
 }
 
@@ -435,10 +433,11 @@ static int sync_path(const char *path, int dir)
     return rc;
 }
 
-/* Replaces `path` by a copy of what a checkpoint at step `keep` covers
- * (see the comment above). */
-static int rebuild(const char *path, long keep, cm_error *err)
+int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long keep, cm_error *err)
 {
+    if (!group || !prefix || group[0] != '/')
+        return cm_fail(err, CM_ERR_RANGE, "%s: rebuild: bad arguments", path ? path : "(null)");
+    const numbered num = {.group = group, .prefix = prefix, .keep = keep};
     if (access(path, R_OK | W_OK) != 0)
         return cm_fail(err, CM_ERR_IO, "cannot open %s: %s", path, strerror(errno));
     size_t tlen = strlen(path) + sizeof ".resume.tmp";
@@ -447,9 +446,9 @@ static int rebuild(const char *path, long keep, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
     snprintf(tmp, tlen, "%s.resume.tmp", path);
     int rc = CM_OK;
+    H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
     hid_t src = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT), dst = H5I_INVALID_HID;
     hid_t sroot = H5I_INVALID_HID, droot = H5I_INVALID_HID;
-    names nm = {0};
     if (src < 0)
         rc = h5io_fail(err, path, "cannot open as HDF5 to resume");
     else if ((dst = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT)) < 0)
@@ -460,23 +459,7 @@ static int rebuild(const char *path, long keep, cm_error *err)
     if (rc == CM_OK)
         rc = copy_attrs(sroot, droot, path, "/", err);
     if (rc == CM_OK)
-        rc = list_links(sroot, path, "/", &nm, err);
-    for (size_t i = 0; i < nm.n && rc == CM_OK; i++) {
-        if (strcmp(nm.v[i], "steps") == 0) {
-            rc = copy_steps(sroot, droot, path, keep, err);
-        } else {
-            size_t len = strlen(nm.v[i]) + 2;
-            char *shown = malloc(len);
-            if (!shown) {
-                rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", path);
-                break;
-            }
-            snprintf(shown, len, "/%s", nm.v[i]);
-            rc = copy_object(sroot, droot, nm.v[i], path, shown, err);
-            free(shown);
-        }
-    }
-    names_free(&nm);
+        rc = copy_members(sroot, droot, path, "/", &num, err);
     if (droot >= 0)
         H5Gclose(droot);
     if (sroot >= 0)
@@ -568,7 +551,7 @@ int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step,
     int rc = h5io_file_new(path, def, &f, err);
     if (rc != CM_OK)
         return rc;
-    if ((rc = rebuild(path, keep_through_step, err)) != CM_OK) {
+    if ((rc = cm_h5_rebuild(path, "/steps", "", keep_through_step, err)) != CM_OK) {
         cm_h5_close(&f, NULL);
         return rc;
     }

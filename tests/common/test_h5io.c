@@ -951,6 +951,77 @@ static int resume_after_kill_at_every_write(void)
     return 0;
 }
 
+/* cm_h5_rebuild on a file not written by h5io (dem_server's grain frames:
+ * root groups frame_NNNNNN and /shapes): the frames up to the one kept
+ * remain with their data and attributes, the later ones go, other groups
+ * stay, no temporary file is left; a file that is not HDF5 is refused
+ * naming it, and left as it was. */
+static int rebuild_numbered_root_groups(void)
+{
+    ENSURE(scratch());
+    char path[128], tmp[160], junk[128];
+    in_scratch(path, sizeof path, "dem_grains.h5");
+    in_scratch(junk, sizeof junk, "junk.h5");
+    snprintf(tmp, sizeof tmp, "%s.resume.tmp", path);
+    hid_t fid = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    ENSURE(fid >= 0);
+    hsize_t dims[2] = {4, 3};
+    hid_t sp = H5Screate_simple(2, dims, NULL), one = H5Screate(H5S_SCALAR);
+    for (int k = 0; k < 4; k++) {
+        char name[32];
+        snprintf(name, sizeof name, "frame_%06d", k);
+        double x[12], t = 0.25 * k;
+        for (int i = 0; i < 12; i++)
+            x[i] = val(i, k);
+        hid_t g = H5Gcreate2(fid, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+        hid_t d = H5Dcreate2(g, "position", H5T_IEEE_F64LE, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+        hid_t a = H5Acreate2(g, "time", H5T_IEEE_F64LE, one, H5P_DEFAULT, H5P_DEFAULT);
+        ENSURE(g >= 0 && d >= 0 && a >= 0 && H5Dwrite(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, x) >= 0 &&
+               H5Awrite(a, H5T_NATIVE_DOUBLE, &t) >= 0);
+        H5Aclose(a);
+        H5Dclose(d);
+        H5Gclose(g);
+    }
+    hid_t g = H5Gcreate2(fid, "shapes", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    hid_t d = H5Dcreate2(g, "shape_000", H5T_IEEE_F64LE, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    ENSURE(d >= 0 && H5Dwrite(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, k_points0) >= 0);
+    H5Dclose(d);
+    H5Gclose(g);
+    H5Sclose(one);
+    H5Sclose(sp);
+    ENSURE(H5Fclose(fid) >= 0);
+
+    cm_error err = {0};
+    ENSURE_MSG(cm_h5_rebuild(path, "/", "frame_", 1, &err) == CM_OK, "%s", err.msg);
+    ENSURE(access(tmp, F_OK) != 0);
+    fid = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(fid >= 0);
+    for (int k = 0; k < 2; k++) {
+        char name[64];
+        double x[12], t = -1;
+        snprintf(name, sizeof name, "/frame_%06d/position", k);
+        ENSURE(!read_dataset(fid, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, 4, 3, x));
+        for (int i = 0; i < 12; i++)
+            ENSURE(x[i] == val(i, k));
+        snprintf(name, sizeof name, "/frame_%06d", k);
+        ENSURE(!read_attr(fid, name, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &t) && t == 0.25 * k);
+    }
+    double sh[12];
+    ENSURE(H5Lexists(fid, "frame_000002", H5P_DEFAULT) == 0 && H5Lexists(fid, "frame_000003", H5P_DEFAULT) == 0);
+    ENSURE(!read_dataset(fid, "/shapes/shape_000", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, 4, 3, sh) &&
+           memcmp(sh, k_points0, sizeof sh) == 0);
+    H5Fclose(fid);
+
+    FILE *fp = fopen(junk, "w");
+    ENSURE(fp && fputs("not HDF5\n", fp) >= 0 && fclose(fp) == 0);
+    ENSURE(cm_h5_rebuild(junk, "/", "frame_", 1, &err) == CM_ERR_IO && strstr(err.msg, junk));
+    char *text = slurp(junk);
+    ENSURE(text && strcmp(text, "not HDF5\n") == 0);
+    free(text);
+    scratch_remove();
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static const test_case tests[] = {
@@ -961,6 +1032,7 @@ int main(int argc, char **argv)
         {"durability_after_sigkill", durability_after_sigkill},
         {"reopen_cuts_back_and_continues", reopen_cuts_back_and_continues},
         {"resume_after_kill_at_every_write", resume_after_kill_at_every_write},
+        {"rebuild_numbered_root_groups", rebuild_numbered_root_groups},
     };
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL); /* the reading side's own failures are ENSUREd */
     return test_main(argc, argv, tests, TEST_COUNT(tests));

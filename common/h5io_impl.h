@@ -107,6 +107,9 @@ int h5io_write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown, i
 int h5io_write_attr(cm_h5 *f, hid_t obj, const char *shown, const char *name, hid_t ftype, hid_t mtype,
                     const void *value, cm_error *err);
 int h5io_dataset_shape(cm_h5 *f, const char *path, int *rank, hsize_t dims[2], int *is_int, cm_error *err);
+/* h5io.c: H5Fcreate (truncating) with h5io's file creation properties;
+ * fails with "<path>: <what>: <HDF5's reason>". */
+int h5io_create_file(const char *path, const char *what, hid_t *fid, cm_error *err);
 /* h5io.c: the handle of a file being created or reopened. */
 int h5io_file_new(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err);
 /* h5io_xdmf.c: the XDMF rewritten in full (atomically), or the last step appended. */

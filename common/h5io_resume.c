@@ -451,8 +451,8 @@ int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long 
     hid_t sroot = H5I_INVALID_HID, droot = H5I_INVALID_HID;
     if (src < 0)
         rc = h5io_fail(err, path, "cannot open as HDF5 to resume");
-    else if ((dst = H5Fcreate(tmp, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT)) < 0)
-        rc = h5io_fail(err, tmp, "cannot create the rebuilt results file");
+    else
+        rc = h5io_create_file(tmp, "cannot create the rebuilt results file", &dst, err);
     if (rc == CM_OK && ((sroot = H5Gopen2(src, "/", H5P_DEFAULT)) < 0 ||
                         (droot = H5Gopen2(dst, "/", H5P_DEFAULT)) < 0))
         rc = h5io_fail(err, path, "opening the root group");

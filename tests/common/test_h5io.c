@@ -762,15 +762,18 @@ ssize_t pwrite(int fd, const void *buf, size_t n, off_t off)
     return next(fd, buf, n, off);
 }
 
-enum { RS_KEPT = 64, RS_AFTER = 2, RS_NP = 6 };
+/* RS_ROWS rows: one with each of the last RS_ROWS kept steps (fewer flushes
+ * than a row per step: the sweep forks a writer per kill point). */
+enum { RS_KEPT = 64, RS_AFTER = 2, RS_NP = 6, RS_ROWS = 4 };
 
 static double rs_val(long step, int ds, int i)
 {
     return val(i, (int)step) + 100.0 * ds + step;
 }
 
-/* Child: a results file with static data, an attribute, RS_KEPT steps and
- * rows, a checkpoint (a flush), then RS_AFTER more steps and rows, killed
+/* Child: a results file with static data, an attribute, RS_KEPT steps (a
+ * row with each of the last RS_ROWS), a checkpoint (a flush), then RS_AFTER
+ * more steps and rows, killed
  * before its kill_at-th write after the checkpoint. Exit 0: the writes
  * ended before kill_at. */
 static void rs_child(const char *path, const char *csv, long kill_at)
@@ -802,7 +805,7 @@ static void rs_child(const char *path, const char *csv, long kill_at)
             cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, RS_NP, 3, &err) ||
             cm_h5_step_doubles(f, "velocity", CM_H5_NODE, vel, RS_NP, 3, &err) ||
             cm_h5_step_ints(f, "id", CM_H5_NODE, id, RS_NP, 1, &err) || cm_h5_step_end(f, &err) ||
-            cm_h5_series_append(se, row, &err))
+            (k >= RS_KEPT - RS_ROWS && cm_h5_series_append(se, row, &err)))
             _exit(5);
     }
     _exit(0);
@@ -851,16 +854,18 @@ static int rs_check(const char *path, const char *csv)
     if (a >= 0)
         H5Aclose(a);
     static const char *const cols[] = {"t", "KE"};
-    double want[(RS_KEPT + 1) * 2], back[(RS_KEPT + 1) * 2];
-    for (int r = 0; r < RS_KEPT; r++)
-        want[2 * r] = rs_val(r, 2, 0), want[2 * r + 1] = rs_val(r, 3, 0);
-    want[2 * RS_KEPT] = -1.0, want[2 * RS_KEPT + 1] = -2.0;
+    double want[(RS_ROWS + 1) * 2], back[(RS_ROWS + 1) * 2];
+    for (int r = 0; r < RS_ROWS; r++) {
+        long k = RS_KEPT - RS_ROWS + r;
+        want[2 * r] = rs_val(k, 2, 0), want[2 * r + 1] = rs_val(k, 3, 0);
+    }
+    want[2 * RS_ROWS] = -1.0, want[2 * RS_ROWS + 1] = -2.0;
     hsize_t n = 0;
-    bad |= read_series(fid, "/series", cols, 2, NULL, &n) || n != RS_KEPT + 1 ||
+    bad |= read_series(fid, "/series", cols, 2, NULL, &n) || n != RS_ROWS + 1 ||
            read_series(fid, "/series", cols, 2, back, &n) || memcmp(back, want, sizeof want) != 0;
     H5Fclose(fid);
     ENSURE_MSG(!bad, "%s: the resumed file differs from what the checkpoint covers", path);
-    ENSURE(check_csv(csv, "t,KE", want, RS_KEPT + 1, 2) == 0);
+    ENSURE(check_csv(csv, "t,KE", want, RS_ROWS + 1, 2) == 0);
     return 0;
 }
 
@@ -920,7 +925,7 @@ static int resume_after_kill_at_every_write(void)
             continue;
         }
         const double pos[3] = {1, 2, 3}, row[2] = {-1.0, -2.0};
-        ENSURE_MSG(cm_h5_series_reopen(f, "/series", cols, 2, csv, RS_KEPT, &se, &err) == CM_OK,
+        ENSURE_MSG(cm_h5_series_reopen(f, "/series", cols, 2, csv, RS_ROWS, &se, &err) == CM_OK,
                    "kill point %ld: %s", n, err.msg);
         ENSURE_MSG(cm_h5_step_begin(f, 10 * (RS_KEPT + 5), 99.0, &err) == CM_OK &&
                    cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, 1, 3, &err) == CM_OK &&

@@ -23,7 +23,11 @@
  * vertex ids rewrite it in full and atomically: temporary file, fsync,
  * rename). A process killed afterwards leaves a file that HDF5 opens, with
  * every completed step and every appended row. H5Fflush hands data to the operating system; it does not
- * fsync the .h5, so a power cut may lose the most recent steps.
+ * fsync the .h5, so a power cut may lose the most recent steps. A process
+ * killed DURING a write (a flush, or the metadata cache writing entries out
+ * on its own) can leave metadata that refers past the file's recorded end:
+ * the file is not crash-consistent, and cm_h5_reopen does not edit it in
+ * place but rebuilds it from what the checkpoint covers (see cm_h5_reopen).
  *
  * The XDMF refers to datasets as "<basename of the .h5>:/steps/...", so the
  * .h5 / .xmf pair can be moved together to another folder.
@@ -150,13 +154,30 @@ long cm_h5_series_rows(const cm_h5_series *s);
 
 /* ---- Resuming a run (checkpoint/restart) --------------------------------- */
 
-/* Reopens an existing results file written by cm_h5_create to continue it:
- * every /steps group whose step is greater than keep_through_step is
- * deleted (a run resumed from a checkpoint rewrites them), the kept steps
- * are listed again in the XDMF (each step dataset carries its XDMF center as
- * the attribute "xdmf_center"), and later cm_h5_step_begin calls must follow
- * the last kept step. def must be the one the file was created with. */
+/* Reopens an existing results file written by cm_h5_create to continue it
+ * after a checkpoint at step keep_through_step, even when the writer was
+ * killed in the middle of a write. The file is rebuilt, never edited in
+ * place: a fresh file "<path>.resume.tmp" receives copies of the /steps
+ * groups up to keep_through_step (the later ones, which a resumed run
+ * rewrites, are not even opened), of every other object (extendible
+ * datasets such as a series up to the last row that reads) and of the
+ * attributes; it is synced and renamed over `path` (a kill during the
+ * resume leaves the old file as it was). A kept object that cannot be read
+ * fails with a message naming the file and the object. The kept steps are
+ * then listed again in the XDMF (each step dataset carries its XDMF center
+ * as the attribute "xdmf_center"), and later cm_h5_step_begin calls must
+ * follow the last kept step. def must be the one the file was created with.
+ * Costs one copy of the kept data. */
 int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step, cm_h5 **out, cm_error *err);
+
+/* The rebuild cm_h5_reopen does, for any HDF5 file (dem_server's grain
+ * frames too): `path` is replaced by a copy of everything in it except the
+ * members of group `group` ("/" or "/steps") named <prefix><digits> with a
+ * number greater than keep, which are not even opened. A kept numbered
+ * member must be a group (whose attribute "step", if it has one, equals its
+ * number). Extendible datasets are copied up to the last chunk that reads.
+ * Written to "<path>.resume.tmp", synced and renamed over `path`. */
+int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long keep, cm_error *err);
 
 /* Reopens the series `path` of a reopened file, cut back to its first `rows`
  * rows, and its CSV (cut back to the header and `rows` lines). columns as

@@ -68,6 +68,7 @@ struct cm_h5 {
     int geometry_static;
 
     /* current step */
+    int steps_group; /* /steps exists (ensure_steps_group) */
     int in_step;
     long step, last_step;
     double time;
@@ -106,6 +107,9 @@ int h5io_write_array(cm_h5 *f, hid_t loc, const char *name, const char *shown, i
 int h5io_write_attr(cm_h5 *f, hid_t obj, const char *shown, const char *name, hid_t ftype, hid_t mtype,
                     const void *value, cm_error *err);
 int h5io_dataset_shape(cm_h5 *f, const char *path, int *rank, hsize_t dims[2], int *is_int, cm_error *err);
+/* h5io.c: H5Fcreate (truncating) with h5io's file creation properties;
+ * fails with "<path>: <what>: <HDF5's reason>". */
+int h5io_create_file(const char *path, const char *what, hid_t *fid, cm_error *err);
 /* h5io.c: the handle of a file being created or reopened. */
 int h5io_file_new(const char *path, const cm_h5_def *def_in, cm_h5 **out, cm_error *err);
 /* h5io_xdmf.c: the XDMF rewritten in full (atomically), or the last step appended. */
@@ -115,6 +119,8 @@ int h5io_xdmf_append(cm_h5 *f, cm_error *err);
 int h5io_step_write(cm_h5 *f, const char *name, cm_h5_center center, int is_int, const void *data, size_t n,
                     int ncomp, cm_error *err);
 int h5io_check_step(cm_h5 *f, size_t *npoints, size_t *ncells, cm_error *err);
+/* h5io_step.c: the group "steps" in loc, with room for many step names. */
+int h5io_create_steps_group(hid_t loc, const char *file, cm_error *err);
 /* h5io_series.c: links a new or reopened series into its file (or frees it on rc). */
 int h5io_series_adopt(cm_h5 *f, cm_h5_series *s, int rc, cm_h5_series **out, cm_error *err);
 

@@ -3,6 +3,39 @@
 
 /* ---- snapshots ---------------------------------------------------------------- */
 
+/* /steps is created with room for the names of 4096 steps in its local
+ * heap: a heap that outgrows its block is moved to a new address, and a
+ * process killed between the write of the group's header (pointing to the
+ * new block) and the end of that flush leaves every step unreachable, the
+ * kept ones included (cm_h5_reopen cannot step over that damage). A block
+ * with room is rewritten in place instead. 4096 x 8 bytes (a 6-digit name
+ * and its padding) is 32 KiB. */
+int h5io_create_steps_group(hid_t loc, const char *file, cm_error *err)
+{
+    hid_t gcpl = H5Pcreate(H5P_GROUP_CREATE), g = H5I_INVALID_HID;
+    int rc = CM_OK;
+    if (gcpl < 0 || H5Pset_local_heap_size_hint(gcpl, 4096 * 8) < 0 ||
+        (g = H5Gcreate2(loc, "steps", H5P_DEFAULT, gcpl, H5P_DEFAULT)) < 0)
+        rc = h5io_fail(err, file, "creating group /steps");
+    if (g >= 0)
+        H5Gclose(g);
+    if (gcpl >= 0)
+        H5Pclose(gcpl);
+    return rc;
+}
+
+static int ensure_steps_group(cm_h5 *f, cm_error *err)
+{
+    if (f->steps_group)
+        return CM_OK;
+    htri_t has = H5Lexists(f->fid, "/steps", H5P_DEFAULT);
+    if (has < 0)
+        return h5io_fail(err, f->path, "looking for /steps");
+    int rc = has ? CM_OK : h5io_create_steps_group(f->fid, f->path, err);
+    f->steps_group = rc == CM_OK;
+    return rc;
+}
+
 int cm_h5_step_begin(cm_h5 *f, long step, double time, cm_error *err)
 {
     if (f->in_step)
@@ -11,12 +44,15 @@ int cm_h5_step_begin(cm_h5 *f, long step, double time, cm_error *err)
     if (step < 0 || step <= f->last_step)
         return cm_fail(err, CM_ERR_STATE, "%s: step %ld does not follow step %ld (steps must increase)", f->path,
                        step, f->last_step);
+    int rc = ensure_steps_group(f, err);
+    if (rc != CM_OK)
+        return rc;
     snprintf(f->group, sizeof f->group, "/steps/%06ld", step);
     f->gid = H5Gcreate2(f->fid, f->group, f->lcpl, H5P_DEFAULT, H5P_DEFAULT);
     if (f->gid < 0)
         return h5io_fail(err, f->path, "creating group %s", f->group);
     int64_t s64 = step;
-    int rc = h5io_write_attr(f, f->gid, f->group, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &time, err);
+    rc = h5io_write_attr(f, f->gid, f->group, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &time, err);
     if (rc == CM_OK)
         rc = h5io_write_attr(f, f->gid, f->group, "step", H5T_STD_I64LE, H5T_NATIVE_INT64, &s64, err);
     if (rc != CM_OK) {

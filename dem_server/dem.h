@@ -149,7 +149,9 @@ int dem_grain_tag(const dem_world *w, int id);
 /* Removes every grain whose centre has x < x_cut; *removed (may be NULL)
  * receives how many. The arrays are compacted in place (no allocation), the
  * removed grains' wall, surface and pair springs go with them, the survivors'
- * springs stay, and the neighbour list is rebuilt before the next pair step. */
+ * springs stay, and the neighbour list is rebuilt before the next pair step.
+ * CM_ERR_NOMEM (nothing else can fail) if the contact history could not be
+ * re-entered; the world must not be stepped then. */
 int dem_grains_remove_below_x(dem_world *w, double x_cut, int *removed);
 /* Removes the grains of the n listed ids (ids as before the call; repeats
  * are ignored). CM_ERR_RANGE for an id out of range, nothing removed then. */

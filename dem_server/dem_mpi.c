@@ -58,8 +58,6 @@ typedef struct dist_ctx {
     size_t wsbuf_cap, wrbuf_cap;
 } dist_ctx;
 
-static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n, cm_error *err);
-static int springs_from_table(dem_world *w, dist_ctx *d, cm_error *err);
 static int wall_rec_alloc(dem_world *w, dist_ctx *d);
 
 enum { REC_FIXED = 39, SPRING_REC_MAX = 2 + DEM_HIST_MAX };
@@ -220,12 +218,6 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     dem_grains *g = &w->g;
     const double t0 = cm_now();
     int rc;
-    /* 0. rank 0 after a terrain window removal (collect, then rejoin): one
-     * process's list is empty, its springs wait in the history table; a
-     * list of them again, for the ranks the grains go to */
-    if (d->rank == 0 && !d->distributed && w->n_pairs == 0 && w->hist[w->hist_cur].count > 0 &&
-        (rc = springs_from_table(w, d, err)))
-        return rc;
     const int own_lo = w->own_lo, own_hi = w->own_hi;
     /* 1. the global box and grid (over the owned grains of every rank) */
     double box[6] = {INFINITY, INFINITY, INFINITY, INFINITY, INFINITY, INFINITY}; /* lo, -hi */
@@ -1012,87 +1004,6 @@ int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
     if (!w->dist_ctx)
         return cm_fail(err, CM_ERR_STATE, "dem_mpi_gather: the world is not distributed");
     return gather_into(w, view, 0, err);
-}
-
-/* Rank of slot `tag` in d->order (sorted by tag), or -1. */
-static int slot_of_tag(const dem_world *w, const dist_ctx *d, int n, int tag)
-{
-    int lo = 0, hi = n - 1;
-    while (lo <= hi) {
-        int mid = (lo + hi) / 2, t = w->g.tag[d->order[mid]];
-        if (t == tag)
-            return d->order[mid];
-        if (t < tag)
-            lo = mid + 1;
-        else
-            hi = mid - 1;
-    }
-    return -1;
-}
-
-/* Rank 0 after a collect: the springs recs[0 .. n) (spring_rec doubles each, lower
- * tag first, a pair possibly twice: from both ranks of an owned–ghost pair)
- * installed as the current list's history: a list of the pairs (never
- * computed with: the world is rebuilt before its next pair step) whose
- * hash the next rebuild carries the springs over from, as from any list,
- * and whose pairs dist_rebuild sends with their grains. */
-static int install_springs(dem_world *w, dist_ctx *d, const double *recs, long n, cm_error *err)
-{
-    dem_grains *g = &w->g;
-    for (int i = 0; i < g->n; i++)
-        d->order[i] = i;
-    g_sort_tags = g->tag;
-    qsort(d->order, (size_t)g->n, sizeof *d->order, slot_by_tag);
-    if (n > INT_MAX / 2 || dem_hash_reset(&d->extra, (int)n) || dem_pairs_reserve(w, (int)(n ? n : 1)) ||
-        dem_hash_reset(&w->hist[w->hist_cur], (int)n))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld contact springs", w->step, n);
-    double *hv = w->hist_val[w->hist_cur];
-    unsigned char *ori = w->hist_ori[w->hist_cur];
-    int np = 0;
-    for (long k = 0; k < n; k++) {
-        const double *r = recs + (size_t)k * spring_rec(w);
-        const uint64_t key = dem_pair_key((int)r[0], (int)r[1]);
-        int s = dem_hash_insert(&d->extra, key);
-        if (d->extra.row[s] >= 0) /* sent by both ranks of the pair: the same spring */
-            continue;
-        d->extra.row[s] = (int)k;
-        int a = slot_of_tag(w, d, g->n, (int)r[0]), b = slot_of_tag(w, d, g->n, (int)r[1]);
-        if (a < 0 || b < 0) /* a removed grain's pair */
-            continue;
-        w->pi[np] = a, w->pj[np] = b; /* lower tag first: ori 1 */
-        memcpy(hv + (size_t)w->hist_stride * np, r + 2, (size_t)w->hist_stride * sizeof *hv);
-        ori[np] = 1;
-        w->hist[w->hist_cur].row[dem_hash_insert(&w->hist[w->hist_cur], key)] = np;
-        np++;
-    }
-    w->n_pairs = np;
-    w->n_active_pairs = 0;
-    w->plan.valid = 0;
-    return CM_OK;
-}
-
-/* Rank 0 before spreading a world whose list a removal emptied (one
- * process's state after dem_window_update): its springs, waiting in the
- * history table, as a list again (install_springs), so that dist_rebuild
- * sends them with their grains. */
-static int springs_from_table(dem_world *w, dist_ctx *d, cm_error *err)
-{
-    const dem_hash *h = &w->hist[w->hist_cur];
-    const double *hv = w->hist_val[w->hist_cur];
-    const unsigned char *ori = w->hist_ori[w->hist_cur];
-    const int sr = spring_rec(w);
-    if (grow(&d->hrbuf, &d->hrbuf_cap, (size_t)h->count * sr + 1))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d springs", w->step, h->count);
-    long m = 0;
-    for (int s = 0; s < h->cap; s++) {
-        if (h->key[s] == DEM_HASH_EMPTY || h->row[s] < 0)
-            continue;
-        const int r = h->row[s];
-        spring_record(w, (double)(uint32_t)(h->key[s] >> 32), (double)(uint32_t)(h->key[s] & 0xffffffffu),
-                      ori[r] ? 1.0 : -1.0 /* to lower tag first */, hv + (size_t)w->hist_stride * r,
-                      d->hrbuf + (size_t)m++ * sr);
-    }
-    return install_springs(w, d, d->hrbuf, m, err);
 }
 
 int dem_mpi_collect(dem_world *w, cm_error *err)

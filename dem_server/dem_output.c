@@ -20,6 +20,7 @@
 
 #include "dem_output.h"
 #include "dem_world.h"
+#include "h5io.h"
 
 struct dem_output {
     char dir[1024];
@@ -338,6 +339,12 @@ int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output
         rc = cm_fail(err, CM_ERR_NOMEM, "%s: out of memory", dir);
         goto done;
     }
+    /* Frames past the checkpoint go: the file is rebuilt from the frames
+     * and shapes the checkpoint covers, not trimmed in place (a kill during
+     * an HDF5 write leaves metadata referring past the file's recorded end;
+     * h5io.h, cm_h5_rebuild). */
+    if ((rc = cm_h5_rebuild(path, "/", "frame_", frames - 1, err)) != CM_OK)
+        goto done;
     if ((o->h5 = H5Fopen(path, H5F_ACC_RDWR, H5P_DEFAULT)) < 0) {
         rc = cm_fail(err, CM_ERR_IO, "%s: cannot reopen the grain frames to resume", path);
         goto done;
@@ -345,17 +352,7 @@ int dem_output_reopen(const char *dir, long frames, long series_rows, dem_output
     /* A run with shaped grains wrote their hulls once (and frames list their
      * orientation in the XDMF): not again after resuming. */
     o->shapes_written = o->shaped = H5Lexists(o->h5, "shapes", H5P_DEFAULT) > 0;
-    /* Frames past the checkpoint go; the kept ones are listed again. */
-    for (long k = frames;; k++) {
-        char name[64];
-        snprintf(name, sizeof name, "frame_%06ld", k);
-        if (H5Lexists(o->h5, name, H5P_DEFAULT) <= 0)
-            break;
-        if (H5Ldelete(o->h5, name, H5P_DEFAULT) < 0) {
-            rc = cm_fail(err, CM_ERR_IO, "%s: cannot delete %s beyond the checkpoint", path, name);
-            goto done;
-        }
-    }
+    /* The kept frames are listed again. */
     for (long k = 0; k < frames; k++) {
         char name[64];
         snprintf(name, sizeof name, "frame_%06ld/position", k);

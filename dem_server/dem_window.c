@@ -337,7 +337,9 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
         double cut = wheel_x - d->behind;
         st->x_cut = cut;
         int removed = 0;
-        dem_grains_remove_below_x(w, cut, &removed);
+        if (dem_grains_remove_below_x(w, cut, &removed))
+            return cm_fail(err, CM_ERR_NOMEM, "window: removing the grains behind x = %.3f m: out of memory for the "
+                           "contact history", cut);
         const dem_grains *g = &w->g;
         double lo = cut;
         for (int i = 0; i < g->n; i++)

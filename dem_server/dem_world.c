@@ -459,15 +459,53 @@ int dem_grain_tag(const dem_world *w, int id)
     return w->g.tag[w->g.slot_of[id]];
 }
 
+/* The pair list after grains_compact: the pairs of two survivors, in their
+ * order (active ones first, as the list keeps them), renamed to the new
+ * slots, each with its spring row and orientation moved along, and the
+ * history table re-entered for them (its capacity kept: dem_hash_reset
+ * only grows a table, and the survivors are fewer). The list is never
+ * stepped with (the world is rebuilt first); it keeps the state whole, so
+ * that a checkpoint or a gather taken now holds every surviving spring, and
+ * the next rebuild carries them over as from any list. Emptying the list
+ * instead left the table pointing at spring rows no one saved. */
+static int pairs_compact(dem_world *w, const int *new_slot)
+{
+    dem_hash *h = &w->hist[w->hist_cur];
+    double *hv = w->hist_val[w->hist_cur];
+    unsigned char *ori = w->hist_ori[w->hist_cur];
+    const size_t hs = (size_t)w->hist_stride;
+    int np = 0, na = 0;
+    for (int p = 0; p < w->n_pairs; p++) {
+        const int a = new_slot[w->pi[p]], b = new_slot[w->pj[p]];
+        if (a < 0 || b < 0)
+            continue;
+        w->pi[np] = a, w->pj[np] = b;
+        memmove(hv + hs * np, hv + hs * p, hs * sizeof *hv);
+        ori[np] = ori[p];
+        na += p < w->n_active_pairs;
+        np++;
+    }
+    w->n_pairs = np, w->n_active_pairs = na;
+    w->plan.valid = 0;
+    if (dem_hash_reset(h, np)) /* grows only when the table was smaller than its list */
+        return CM_ERR_NOMEM;
+    for (int p = 0; p < np; p++)
+        h->row[dem_hash_insert(h, dem_pair_key(w->g.tag[w->pi[p]], w->g.tag[w->pj[p]]))] = p;
+    return CM_OK;
+}
+
 /* Compacts the grain arrays to the slots with keep[slot] != 0, in place and
  * in slot order (the destination never passes the source). Survivors get
  * dense ids in their old id order; every per-grain side array moves along.
- * keep and the id map live in w->scratch (no allocation). */
+ * keep and the id and slot maps live in w->scratch (no allocation).
+ * Returns the number removed, or -1 when the history table could not grow. */
 static int grains_compact(dem_world *w, const unsigned char *keep)
 {
     dem_grains *g = &w->g;
     const int n = g->n;
-    int *new_id = (int *)(w->scratch + g->cap); /* scratch: >= 4 doubles per grain, keep uses the first cap bytes */
+    /* scratch: >= 4 doubles per grain; keep uses the first cap bytes, the
+     * two maps a cap of ints each from one and two doubles per grain on */
+    int *new_id = (int *)(w->scratch + g->cap);
     int next = 0;
     for (int id = 0; id < n; id++)
         new_id[id] = keep[g->slot_of[id]] ? next++ : -1;
@@ -477,8 +515,10 @@ static int grains_compact(dem_world *w, const unsigned char *keep)
                      g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
     int *ints[] = {g->mat, g->surf_count, g->shape, g->tag};
     const size_t wh = (size_t)w->wall_stride * w->hist_stride, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+    int *new_slot = (int *)(w->scratch + 2 * (size_t)g->cap);
     int d = 0;
     for (int i = 0; i < n; i++) {
+        new_slot[i] = keep[i] ? d : -1;
         if (!keep[i]) {
             w->n_shaped -= g->shape[i] >= 0;
             w->n_frozen -= g->frozen[i] != 0;
@@ -504,13 +544,9 @@ static int grains_compact(dem_world *w, const unsigned char *keep)
     for (int i = 0; i < d; i++)
         g->slot_of[g->id[i]] = i;
     g->n = d;
-    /* The pair list names old slots: empty it and rebuild before the next
-     * pair step. The history table stays keyed by tags, so the survivors'
-     * springs carry over and the removed grains' ones are dropped. */
-    w->n_pairs = w->n_active_pairs = 0;
     w->need_rebuild = 1;
     w->walls_near_valid = 0;
-    return n - d;
+    return pairs_compact(w, new_slot) == CM_OK ? n - d : -1;
 }
 
 int dem_grains_remove_below_x(dem_world *w, double x_cut, int *removed)
@@ -521,8 +557,8 @@ int dem_grains_remove_below_x(dem_world *w, double x_cut, int *removed)
         keep[i] = !(g->x[i] < x_cut);
     int r = grains_compact(w, keep);
     if (removed)
-        *removed = r;
-    return CM_OK;
+        *removed = r < 0 ? 0 : r;
+    return r < 0 ? CM_ERR_NOMEM : CM_OK;
 }
 
 int dem_grains_remove(dem_world *w, int n, const int *ids, cm_error *err)
@@ -535,7 +571,8 @@ int dem_grains_remove(dem_world *w, int n, const int *ids, cm_error *err)
     memset(keep, 1, (size_t)g->n);
     for (int k = 0; k < n; k++)
         keep[g->slot_of[ids[k]]] = 0;
-    grains_compact(w, keep);
+    if (grains_compact(w, keep) < 0)
+        return cm_fail(err, CM_ERR_NOMEM, "dem_grains_remove: out of memory for the contact history");
     return CM_OK;
 }
 

@@ -89,7 +89,8 @@ static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, double lug_pe
                             .motion = drive->motion, .target_load = drive->target_load, .radius = drive->radius,
                             .interval = c->interval, .lug_period = lug_period, .slip = drive->slip,
                             .torque = drive->torque, .drawbar = drive->drawbar,
-                            .fem_state_hash = fem_state_hash(c->model)};
+                            .travel_distance = drive->travel_distance, .travelled = c->ds.travelled,
+                            .travel_done = c->ds.phase == DRIVE_DONE, .fem_state_hash = fem_state_hash(c->model)};
     if ((rc = fem_summary_write(&sdef, err)) < 0)
         return rc;
     /* [/traction] */

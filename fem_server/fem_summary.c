@@ -122,6 +122,7 @@ typedef struct summary_result {
     double conv[4][11];
     char warning[600]; /* the load check */
     char drift[400];   /* the sinkage check: still changing over the averaged part */
+    char short_travel[400]; /* the travel stopped before travel_distance */
 } summary_result;
 
 static const char *const k_control[] = {"slip", "torque", "drawbar"};
@@ -244,6 +245,14 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
                      r->t_start, r->t_end, 1e3 * h1.mean, 1e3 * h2.mean, 1e3 * h1.half_width, 1e3 * h2.half_width,
                      dz > 0 ? "sinking" : "rising");
     }
+    /* the travel check: a run interrupted (and not resumed to its end) or
+     * stopped by run.end_time averaged less than the scene asked for */
+    if (!d->travel_done && d->travel_distance > 0 && d->motion != DRIVE_HOLD)
+        snprintf(r->short_travel, sizeof r->short_travel,
+                 "the travel stopped at %.3f m of wheel.travel_distance = %.3f m (the run was interrupted, or "
+                 "run.end_time came first): these statistics cover only the part travelled (./run --resume DIR "
+                 "continues an interrupted run; raise run.end_time otherwise)",
+                 d->travelled, d->travel_distance);
     /* the load check */
     if (d->target_load > 0 && fabs(W - d->target_load) > 0.10 * d->target_load) {
         if (d->motion == DRIVE_SINK_TRAVEL)
@@ -298,6 +307,8 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
         cm_log_warn("%s", r->warning);
     if (r->drift[0])
         cm_log_warn("%s", r->drift);
+    if (r->short_travel[0])
+        cm_log_warn("%s", r->short_travel);
 }
 
 static int write_h5(const char *path, const fem_summary_def *d, const summary_result *r, cm_error *err)
@@ -325,7 +336,9 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
                attr_double(g, "steady_exchanges", (double)(r->end - r->start)) ||
                attr_double(g, "lug_periods", r->lug_periods) || attr_double(g, "lug_period_rad", d->lug_period) ||
                attr_double(g, "target_load", d->target_load) || attr_string(g, "control", k_control[d->control]) ||
-               attr_string(g, "load_warning", r->warning) || attr_string(g, "drift_warning", r->drift);
+               attr_string(g, "load_warning", r->warning) || attr_string(g, "drift_warning", r->drift) ||
+               attr_double(g, "travel_completed", d->travel_done) || attr_double(g, "travelled_m", d->travelled) ||
+               attr_string(g, "travel_warning", r->short_travel);
         if (r->travelled)
             bad |= write_matrix(g, "quantities", &rows[0][0], NQ, NSTAT) ||
                    write_matrix(g, "convergence", &r->conv[0][0], 4, 11) ||
@@ -361,8 +374,11 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
     cm_json_number(f, d->target_load);
     fputs(",\n  \"radius\": ", f);
     cm_json_number(f, d->radius);
-    fprintf(f, ",\n  \"fem_state_hash\": \"%016llx\",\n  \"travelled\": %s,\n  \"steady\": {\"start_time\": ",
-            (unsigned long long)d->fem_state_hash, r->travelled ? "true" : "false");
+    fprintf(f, ",\n  \"fem_state_hash\": \"%016llx\",\n  \"travelled\": %s,\n  \"travel_completed\": %s,\n  "
+               "\"travelled_m\": ",
+            (unsigned long long)d->fem_state_hash, r->travelled ? "true" : "false", d->travel_done ? "true" : "false");
+    cm_json_number(f, d->travelled);
+    fputs(",\n  \"steady\": {\"start_time\": ", f);
     cm_json_number(f, r->t_start);
     fputs(", \"end_time\": ", f);
     cm_json_number(f, r->t_end);
@@ -415,13 +431,12 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         fputc(']', f);
     }
     fputs("]},\n  \"warnings\": [", f);
-    if (r->warning[0])
-        cm_json_string(f, r->warning);
-    if (r->drift[0]) {
-        if (r->warning[0])
-            fputs(", ", f);
-        cm_json_string(f, r->drift);
-    }
+    const char *warnings[] = {r->warning, r->drift, r->short_travel};
+    for (int k = 0, any = 0; k < 3; k++)
+        if (warnings[k][0]) {
+            fputs(any++ ? ", " : "", f);
+            cm_json_string(f, warnings[k]);
+        }
     fputs("]\n}\n", f);
     int bad = ferror(f);
     if (fclose(f) != 0 || bad || rename(tmp, path) != 0) {

@@ -29,7 +29,10 @@
  * from the axle torque), and the soil's force Fx along the travel and
  * moment My about the axle (under drawbar or torque control they balance
  * the prescribed load). The run warns, naming the cause, when the steady load is more
- * than 10 % from target_load. */
+ * than 10 % from target_load, when the sinkage is still drifting over the
+ * averaged part, and when the travel stopped short of travel_distance
+ * (interrupted, or run.end_time came first: the statistics cover only the
+ * part travelled; summary.json's travel_completed). */
 #ifndef FEM_SUMMARY_H
 #define FEM_SUMMARY_H
 
@@ -47,6 +50,9 @@ typedef struct fem_summary_def {
     double lug_period;     /* rad, the tread pattern's period (2 pi / lugs); 0: none */
     double interval;       /* s, exchange interval */
     double slip, torque, drawbar; /* the prescribed slip, axle torque or drawbar load (per control) */
+    double travel_distance; /* m, wheel.travel_distance */
+    double travelled;       /* m, travelled when the run ended */
+    int travel_done;        /* the travel reached travel_distance (else interrupted or run.end_time) */
     uint64_t fem_state_hash;
 } fem_summary_def;
 

@@ -8,8 +8,9 @@ Draws, against the wheel's travel (x from where the travel phase began):
   - the sinkage (traction.csv), with the paper's reading at 30 % slip: a
     steady ~45 mm after ~200 mm of travel (fig. 10; read from the text, the
     figure's scatter is not in hand), and the fem_server's steady mean with
-    its 95 % interval (summary.json) where the run finished its travel (an
-    interrupted run's summary averages whatever part it had);
+    its 95 % interval (summary.json) where the run finished its travel
+    (summary.json's travel_completed; an interrupted run's summary averages
+    whatever part it had);
   - the drawbar pull T_P (traction.csv), a running mean over 50 mm;
   - the terrain replacements: where dem_series.csv's grain count drops (the
     rear cut of the window), as vertical lines.
@@ -68,11 +69,11 @@ def main():
         w = max(1, int(round(np.searchsorted(x, 0.05))))
         tp = np.convolve(tr["T_P"][travel], np.ones(w) / w, mode="same")
         ax_p.plot(x, tp, lw=0.8, color=line.get_color(), label=label)
-        finished = (tr["phase"] == 2).any()  # the travel completed (PHASE_NAMES)
+        s = runio.read_summary(run)  # None while the run is still going
+        finished = bool(s and s.get("travel_completed", (tr["phase"] == 2).any()))  # key: fem_server since session 9
         if not finished:
-            line.set_label(label + " (interrupted at %.2f m)" % x[-1])
-        s = runio.read_summary(run) if finished else None
-        if s and "sinkage" in s["stats"]:
+            line.set_label(label + " (stopped at %.2f m)" % x[-1])
+        if finished and "sinkage" in s["stats"]:
             st = s["stats"]["sinkage"]
             ax_z.axhspan(1e3 * (st.mean - st.half_width), 1e3 * (st.mean + st.half_width),
                          color=line.get_color(), alpha=0.2)

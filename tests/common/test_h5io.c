@@ -1,8 +1,12 @@
 /* Results files: data read back through the plain HDF5 API equals what was
  * written, bit for bit; the XDMF index is well formed and every dataset it
  * names exists with the declared shape; a process killed by SIGKILL leaves
- * every flushed step and row readable; errors name the path. */
+ * every flushed step and row readable; a writer killed at any of its writes
+ * after a checkpoint resumes with exactly what the checkpoint covers (or, in
+ * the one case HDF5's damage reaches it, fails naming the file and /steps);
+ * errors name the path. */
 #include <dirent.h>
+#include <dlfcn.h>
 #include <errno.h>
 #include <signal.h>
 #include <stdint.h>
@@ -735,6 +739,295 @@ static int reopen_cuts_back_and_continues(void)
     return 0;
 }
 
+/* ---- resuming after a kill in the middle of a write ---------------------------------
+ *
+ * HDF5 files are not crash-consistent: a process killed while HDF5 writes
+ * its metadata out (during a flush, or when the metadata cache evicts
+ * entries) leaves entries that refer to space allocated after the last
+ * completed flush. To kill at every such moment deterministically, this
+ * program's pwrite (the system call HDF5's default file driver writes with;
+ * h5io's XDMF append uses it too) counts the writes in the child and raises
+ * SIGKILL before the n-th one. HDF5 itself is the real library: only the
+ * moment of the kill is chosen. */
+
+static long g_pwrites, g_kill_at; /* child only: kill before write g_kill_at (0: never) */
+
+ssize_t pwrite(int fd, const void *buf, size_t n, off_t off)
+{
+    static ssize_t (*next)(int, const void *, size_t, off_t);
+    if (!next)
+        *(void **)&next = dlsym(RTLD_NEXT, "pwrite");
+    if (g_kill_at > 0 && ++g_pwrites == g_kill_at)
+        raise(SIGKILL);
+    return next(fd, buf, n, off);
+}
+
+/* RS_ROWS rows: one with each of the last RS_ROWS kept steps (fewer flushes
+ * than a row per step: the sweep forks a writer per kill point). */
+enum { RS_KEPT = 64, RS_AFTER = 2, RS_NP = 6, RS_ROWS = 4 };
+
+static double rs_val(long step, int ds, int i)
+{
+    return val(i, (int)step) + 100.0 * ds + step;
+}
+
+/* Child: a results file with static data, an attribute, RS_KEPT steps (a
+ * row with each of the last RS_ROWS), a checkpoint (a flush), then RS_AFTER
+ * more steps and rows, killed
+ * before its kill_at-th write after the checkpoint. Exit 0: the writes
+ * ended before kill_at. */
+static void rs_child(const char *path, const char *csv, long kill_at)
+{
+    cm_error err = {0};
+    cm_h5_def def = cm_h5_default_def();
+    def.xdmf = CM_H5_XDMF_POLYVERTEX;
+    cm_h5 *f;
+    cm_h5_series *se;
+    static const char *const cols[] = {"t", "KE"};
+    if (cm_h5_create(path, &def, &f, &err) != CM_OK || cm_h5_series_create(f, "/series", cols, 2, csv, &se, &err) ||
+        cm_h5_write_doubles(f, "/mesh/points0", k_points0, NP, 3, &err) ||
+        cm_h5_attr_string(f, "/", "units", "m, s", &err))
+        _exit(3);
+    for (long k = 0; k < RS_KEPT + RS_AFTER; k++) {
+        if (k == RS_KEPT) { /* the checkpoint */
+            if (cm_h5_flush(f, &err) != CM_OK)
+                _exit(4);
+            g_kill_at = kill_at;
+        }
+        double pos[RS_NP * 3], vel[RS_NP * 3];
+        int id[RS_NP];
+        for (int i = 0; i < RS_NP * 3; i++)
+            pos[i] = rs_val(k, 0, i), vel[i] = rs_val(k, 1, i);
+        for (int i = 0; i < RS_NP; i++)
+            id[i] = (int)(1000 * k) + i;
+        const double row[2] = {rs_val(k, 2, 0), rs_val(k, 3, 0)};
+        if (cm_h5_step_begin(f, 10 * k, 0.5 * (double)k, &err) ||
+            cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, RS_NP, 3, &err) ||
+            cm_h5_step_doubles(f, "velocity", CM_H5_NODE, vel, RS_NP, 3, &err) ||
+            cm_h5_step_ints(f, "id", CM_H5_NODE, id, RS_NP, 1, &err) || cm_h5_step_end(f, &err) ||
+            (k >= RS_KEPT - RS_ROWS && cm_h5_series_append(se, row, &err)))
+            _exit(5);
+    }
+    _exit(0);
+}
+
+/* The resumed file holds exactly the kept steps (values as written), the
+ * static data, the attribute, the kept rows then the row appended after
+ * resuming, and step 10 * (RS_KEPT + 5). */
+static int rs_check(const char *path, const char *csv)
+{
+    hid_t fid = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE_MSG(fid >= 0, "%s does not open", path);
+    int bad = 0;
+    for (long k = 0; k < RS_KEPT && !bad; k++) {
+        char ds[64];
+        double pos[RS_NP * 3], vel[RS_NP * 3], t = -1;
+        int id[RS_NP];
+        snprintf(ds, sizeof ds, "/steps/%06ld/position", 10 * k);
+        bad |= read_dataset(fid, ds, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, RS_NP, 3, pos);
+        snprintf(ds, sizeof ds, "/steps/%06ld/velocity", 10 * k);
+        bad |= read_dataset(fid, ds, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, RS_NP, 3, vel);
+        snprintf(ds, sizeof ds, "/steps/%06ld/id", 10 * k);
+        bad |= read_dataset(fid, ds, H5T_STD_I32LE, H5T_NATIVE_INT, 1, RS_NP, 0, id);
+        for (int i = 0; i < RS_NP * 3 && !bad; i++)
+            bad |= pos[i] != rs_val(k, 0, i) || vel[i] != rs_val(k, 1, i);
+        for (int i = 0; i < RS_NP && !bad; i++)
+            bad |= id[i] != (int)(1000 * k) + i;
+        snprintf(ds, sizeof ds, "/steps/%06ld", 10 * k);
+        bad |= read_attr(fid, ds, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &t) || t != 0.5 * (double)k;
+        if (bad)
+            fprintf(stderr, "%s: step %ld differs from what was written\n", path, 10 * k);
+    }
+    hid_t g = H5Gopen2(fid, "/steps", H5P_DEFAULT);
+    H5G_info_t gi = {0};
+    bad |= g < 0 || H5Gget_info(g, &gi) < 0 || gi.nlinks != RS_KEPT + 1;
+    if (g >= 0)
+        H5Gclose(g);
+    char last[32];
+    snprintf(last, sizeof last, "/steps/%06d", 10 * (RS_KEPT + 5));
+    bad |= H5Lexists(fid, last, H5P_DEFAULT) <= 0;
+    double p0[NP * 3];
+    bad |= read_dataset(fid, "/mesh/points0", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, NP, 3, p0) ||
+           memcmp(p0, k_points0, sizeof p0) != 0;
+    hid_t a = H5Aopen_by_name(fid, "/", "units", H5P_DEFAULT, H5P_DEFAULT);
+    bad |= a < 0;
+    if (a >= 0)
+        H5Aclose(a);
+    static const char *const cols[] = {"t", "KE"};
+    double want[(RS_ROWS + 1) * 2], back[(RS_ROWS + 1) * 2];
+    for (int r = 0; r < RS_ROWS; r++) {
+        long k = RS_KEPT - RS_ROWS + r;
+        want[2 * r] = rs_val(k, 2, 0), want[2 * r + 1] = rs_val(k, 3, 0);
+    }
+    want[2 * RS_ROWS] = -1.0, want[2 * RS_ROWS + 1] = -2.0;
+    hsize_t n = 0;
+    bad |= read_series(fid, "/series", cols, 2, NULL, &n) || n != RS_ROWS + 1 ||
+           read_series(fid, "/series", cols, 2, back, &n) || memcmp(back, want, sizeof want) != 0;
+    H5Fclose(fid);
+    ENSURE_MSG(!bad, "%s: the resumed file differs from what the checkpoint covers", path);
+    ENSURE(check_csv(csv, "t,KE", want, RS_ROWS + 1, 2) == 0);
+    return 0;
+}
+
+/* A writer killed at each of its writes after a checkpoint (all the writes
+ * of the RS_AFTER steps and rows that follow it; RS_KEPT = 64 makes the
+ * first of them split the full symbol-table node of /steps): resuming with
+ * cm_h5_reopen and cm_h5_series_reopen gets back exactly the steps and rows
+ * the checkpoint covers, appends a step and a row and closes; the files
+ * open and read whole in h5py. Where the damage reaches what the checkpoint
+ * covers (a kill while a /steps symbol-table node split is half written:
+ * the group cannot be listed at all), the resume fails with a message
+ * naming the file and /steps instead and leaves no temporary file; every
+ * other kill point must be recovered. Prints the counts. */
+static int resume_after_kill_at_every_write(void)
+{
+    ENSURE(scratch());
+    cm_h5_def def = cm_h5_default_def();
+    def.xdmf = CM_H5_XDMF_POLYVERTEX;
+    static const char *const cols[] = {"t", "KE"};
+    int recovered = 0, refused = 0, failed = 0;
+    char list[8192] = "";
+    size_t used = 0;
+    long n;
+    for (n = 1;; n++) {
+        char path[128], csv[128], name[32];
+        snprintf(name, sizeof name, "k%03ld.h5", n);
+        in_scratch(path, sizeof path, name);
+        snprintf(name, sizeof name, "k%03ld.csv", n);
+        in_scratch(csv, sizeof csv, name);
+        fflush(NULL);
+        pid_t pid = fork();
+        ENSURE(pid >= 0);
+        if (pid == 0)
+            rs_child(path, csv, n);
+        int status = 0;
+        ENSURE(waitpid(pid, &status, 0) == pid);
+        if (WIFEXITED(status) && WEXITSTATUS(status) == 0)
+            break; /* n is past the last write: every kill point was tried */
+        ENSURE_MSG(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL, "kill point %ld: child status %d", n, status);
+        cm_error err = {0};
+        cm_h5 *f = NULL;
+        cm_h5_series *se = NULL;
+        int rc = cm_h5_reopen(path, &def, 10 * (RS_KEPT - 1), &f, &err);
+        if (rc != CM_OK) {
+            /* only the damage resuming cannot step over (the /steps group
+             * itself cannot be listed), and named */
+            if (!strstr(err.msg, path) || !strstr(err.msg, "listing /steps: ")) {
+                printf("  kill point %3ld: FAILED: %s\n", n, err.msg);
+                failed++;
+                continue;
+            }
+            char tmp[160];
+            snprintf(tmp, sizeof tmp, "%s.resume.tmp", path);
+            ENSURE_MSG(access(tmp, F_OK) != 0, "kill point %ld: %s left behind", n, tmp);
+            printf("  kill point %3ld: refused: %s\n", n, err.msg);
+            refused++;
+            continue;
+        }
+        const double pos[3] = {1, 2, 3}, row[2] = {-1.0, -2.0};
+        ENSURE_MSG(cm_h5_series_reopen(f, "/series", cols, 2, csv, RS_ROWS, &se, &err) == CM_OK,
+                   "kill point %ld: %s", n, err.msg);
+        ENSURE_MSG(cm_h5_step_begin(f, 10 * (RS_KEPT + 5), 99.0, &err) == CM_OK &&
+                   cm_h5_step_doubles(f, "position", CM_H5_NODE, pos, 1, 3, &err) == CM_OK &&
+                   cm_h5_step_end(f, &err) == CM_OK && cm_h5_series_append(se, row, &err) == CM_OK,
+                   "kill point %ld: %s", n, err.msg);
+        ENSURE_MSG(cm_h5_close(&f, &err) == CM_OK, "kill point %ld: %s", n, err.msg);
+        if (rs_check(path, csv))
+            return 1;
+        if (used + strlen(path) + 2 < sizeof list)
+            used += (size_t)snprintf(list + used, sizeof list - used, " %s", path);
+        recovered++;
+    }
+    printf("%ld kill points: %d recovered exactly, %d refused naming /steps, %d failed\n", n - 1, recovered, refused,
+           failed);
+    ENSURE(failed == 0);
+    ENSURE(n > 10);        /* the child did write after the checkpoint */
+    ENSURE(recovered > 0); /* and the sweep recovered files to check below */
+    /* Every recovered file reads whole in h5py (every dataset, every attribute). */
+    char cmd[sizeof list + 400];
+    snprintf(cmd, sizeof cmd,
+             "/usr/bin/python3 -c 'import sys, h5py\n"
+             "for p in sys.argv[1:]:\n"
+             "    with h5py.File(p, \"r\") as f:\n"
+             "        f.visititems(lambda n, o: (o[()] if isinstance(o, h5py.Dataset) else None, dict(o.attrs)) and None)\n"
+             "' %s",
+             list);
+    ENSURE_MSG(system(cmd) == 0, "h5py could not read every recovered file");
+    scratch_remove();
+    return 0;
+}
+
+/* cm_h5_rebuild on a file not written by h5io (dem_server's grain frames:
+ * root groups frame_NNNNNN and /shapes): the frames up to the one kept
+ * remain with their data and attributes, the later ones go, other groups
+ * stay, no temporary file is left; a file that is not HDF5 is refused
+ * naming it, and left as it was. */
+static int rebuild_numbered_root_groups(void)
+{
+    ENSURE(scratch());
+    char path[128], tmp[160], junk[128];
+    in_scratch(path, sizeof path, "dem_grains.h5");
+    in_scratch(junk, sizeof junk, "junk.h5");
+    snprintf(tmp, sizeof tmp, "%s.resume.tmp", path);
+    hid_t fid = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    ENSURE(fid >= 0);
+    hsize_t dims[2] = {4, 3};
+    hid_t sp = H5Screate_simple(2, dims, NULL), one = H5Screate(H5S_SCALAR);
+    for (int k = 0; k < 4; k++) {
+        char name[32];
+        snprintf(name, sizeof name, "frame_%06d", k);
+        double x[12], t = 0.25 * k;
+        for (int i = 0; i < 12; i++)
+            x[i] = val(i, k);
+        hid_t g = H5Gcreate2(fid, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+        hid_t d = H5Dcreate2(g, "position", H5T_IEEE_F64LE, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+        hid_t a = H5Acreate2(g, "time", H5T_IEEE_F64LE, one, H5P_DEFAULT, H5P_DEFAULT);
+        ENSURE(g >= 0 && d >= 0 && a >= 0 && H5Dwrite(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, x) >= 0 &&
+               H5Awrite(a, H5T_NATIVE_DOUBLE, &t) >= 0);
+        H5Aclose(a);
+        H5Dclose(d);
+        H5Gclose(g);
+    }
+    hid_t g = H5Gcreate2(fid, "shapes", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    hid_t d = H5Dcreate2(g, "shape_000", H5T_IEEE_F64LE, sp, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
+    ENSURE(d >= 0 && H5Dwrite(d, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, k_points0) >= 0);
+    H5Dclose(d);
+    H5Gclose(g);
+    H5Sclose(one);
+    H5Sclose(sp);
+    ENSURE(H5Fclose(fid) >= 0);
+
+    cm_error err = {0};
+    ENSURE_MSG(cm_h5_rebuild(path, "/", "frame_", 1, &err) == CM_OK, "%s", err.msg);
+    ENSURE(access(tmp, F_OK) != 0);
+    fid = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(fid >= 0);
+    for (int k = 0; k < 2; k++) {
+        char name[64];
+        double x[12], t = -1;
+        snprintf(name, sizeof name, "/frame_%06d/position", k);
+        ENSURE(!read_dataset(fid, name, H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, 4, 3, x));
+        for (int i = 0; i < 12; i++)
+            ENSURE(x[i] == val(i, k));
+        snprintf(name, sizeof name, "/frame_%06d", k);
+        ENSURE(!read_attr(fid, name, "time", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, &t) && t == 0.25 * k);
+    }
+    double sh[12];
+    ENSURE(H5Lexists(fid, "frame_000002", H5P_DEFAULT) == 0 && H5Lexists(fid, "frame_000003", H5P_DEFAULT) == 0);
+    ENSURE(!read_dataset(fid, "/shapes/shape_000", H5T_IEEE_F64LE, H5T_NATIVE_DOUBLE, 2, 4, 3, sh) &&
+           memcmp(sh, k_points0, sizeof sh) == 0);
+    H5Fclose(fid);
+
+    FILE *fp = fopen(junk, "w");
+    ENSURE(fp && fputs("not HDF5\n", fp) >= 0 && fclose(fp) == 0);
+    ENSURE(cm_h5_rebuild(junk, "/", "frame_", 1, &err) == CM_ERR_IO && strstr(err.msg, junk));
+    char *text = slurp(junk);
+    ENSURE(text && strcmp(text, "not HDF5\n") == 0);
+    free(text);
+    scratch_remove();
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static const test_case tests[] = {
@@ -744,6 +1037,8 @@ int main(int argc, char **argv)
         {"xdmf_well_formed", xdmf_well_formed},
         {"durability_after_sigkill", durability_after_sigkill},
         {"reopen_cuts_back_and_continues", reopen_cuts_back_and_continues},
+        {"resume_after_kill_at_every_write", resume_after_kill_at_every_write},
+        {"rebuild_numbered_root_groups", rebuild_numbered_root_groups},
     };
     H5Eset_auto2(H5E_DEFAULT, NULL, NULL); /* the reading side's own failures are ENSUREd */
     return test_main(argc, argv, tests, TEST_COUNT(tests));

@@ -144,9 +144,9 @@ enum { CHECK_EVERY = 250, CUT_STEP = 750 };
 /* The terrain window's shift at CUT_STEP (dem_coupled.c, window_update):
  * the world collected on rank 0, which must then be one process's exactly
  * (compared before the change), the grains behind X_CUT removed there and
- * in one process (the pair list emptied, the springs waiting in the
- * history table), spread again (dem_mpi_rejoin), and the gathered view in
- * that state compared too. */
+ * in one process (the pair list cut to the survivors' pairs, their springs
+ * and history table kept), spread again (dem_mpi_rejoin), and the gathered
+ * view in that state compared too. */
 static int cut_behind(dem_world *w, dem_world *ref, dem_world *view, long *wall_contacts)
 {
     cm_error err = {0};
@@ -156,7 +156,7 @@ static int cut_behind(dem_world *w, dem_world *ref, dem_world *view, long *wall_
         int r_ref = 0, r = 0;
         ENSURE(dem_grains_remove_below_x(ref, X_CUT, &r_ref) == 0 && dem_grains_remove_below_x(w, X_CUT, &r) == 0);
         ENSURE(r == r_ref && r > 0);
-        ENSURE(ref->n_pairs == 0 && ref->hist[ref->hist_cur].count > 0);
+        ENSURE(ref->n_pairs > 0 && ref->hist[ref->hist_cur].count == ref->n_pairs);
         printf("collected on rank 0 at step %d: one process's state; %d grains removed behind x = %.3f m\n",
                CUT_STEP, r, X_CUT);
     }

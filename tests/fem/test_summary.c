@@ -285,12 +285,47 @@ static int summary_sinkage_drift(void)
     return 0;
 }
 
+/* A run that stopped short of its travel (interrupted, or run.end_time
+ * first) says so: wheel.h5's travel_warning and travel_completed,
+ * summary.json's travel_completed and warnings; the same series with the
+ * travel done has no warning. */
+static int summary_short_travel(void)
+{
+    char dir[] = "/tmp/fem_summary_short_XXXXXX";
+    ENSURE(mkdtemp(dir));
+    ENSURE(write_synthetic(dir, 0.0) == 0);
+    cm_error err = {0};
+    fem_summary_def d = {.out_dir = dir, .scene = "synthetic", .control = DRIVE_CONTROL_SLIP,
+                         .motion = DRIVE_LOAD_TRAVEL, .target_load = syn_W, .radius = syn_R,
+                         .lug_period = 2 * M_PI / 16, .interval = syn_dt, .slip = 0.1,
+                         .travel_distance = 2.5, .travelled = syn_v * (SYN_N - 1) * syn_dt, .travel_done = 0};
+    char warn[400], buf[8192];
+    for (int done = 0; done <= 1; done++) {
+        d.travel_done = done;
+        ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
+        ENSURE(read_summary_attr(dir, "travel_warning", warn, sizeof warn) == 0);
+        ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
+        if (!done) {
+            printf("  %s\n", warn);
+            ENSURE_MSG(strstr(warn, "stopped at 1.000 m of wheel.travel_distance = 2.500 m"), "%s", warn);
+            ENSURE(strstr(buf, "\"travel_completed\": false") && strstr(buf, "\"warnings\": [\"the travel stopped"));
+        } else {
+            ENSURE_MSG(warn[0] == '\0', "%s", warn);
+            ENSURE(strstr(buf, "\"travel_completed\": true") && strstr(buf, "\"warnings\": []"));
+        }
+    }
+    snprintf(buf, sizeof buf, "rm -rf %s", dir);
+    ENSURE(system(buf) == 0);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"iat_of_ar1", iat_of_ar1},
     {"coverage_correlated", coverage_correlated},
     {"lug_window_and_profile", lug_window_and_profile},
     {"summary_of_synthetic_run", summary_of_synthetic_run},
     {"summary_sinkage_drift", summary_sinkage_drift},
+    {"summary_short_travel", summary_short_travel},
 };
 
 int main(int argc, char **argv)

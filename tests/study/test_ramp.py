@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The ramped-slip rig's analysis (bench/post/ramp.py) on a synthetic
 traction.csv with a known traction-slip law: the binned curve recovers the
-law per actual load, and the rows outside the travel are left out.
+law per actual load, the rows outside the travel are left out, and fixed-slip
+points are compared with the curve at their slip.
 
 usage: test_ramp.py CASE"""
 import os
@@ -84,7 +85,45 @@ def no_travel_refused():
         raise AssertionError("a run without travel rows accepted")
 
 
-CASES = {f.__name__: f for f in (recovers_law, no_travel_refused)}
+def write_sweep(path, points):
+    """A slip_sweep CSV (the columns ramp.py reads) of (slip, status, offset)
+    points: the law's values plus offset in every traction coefficient."""
+    cols = ["slip_percent", "tire", "status", "T_H_per_W", "T_H_per_W_ci95", "T_R_per_W", "T_R_per_W_ci95",
+            "T_P_per_W", "T_P_per_W_ci95", "sinkage_mean_m", "sinkage_ci95_m"]
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for s, status, off in points:
+            th, tr, sink = law(s)
+            vals = [100 * s, "elastic", status, th + off, 0.01, tr + off, 0.01, th + tr + off, 0.01, sink + 1e-3, 1e-4]
+            f.write(",".join(str(v) for v in vals) + "\n")
+
+
+def compares_with_fixed():
+    with tempfile.TemporaryDirectory() as d:
+        write_run(d)
+        sweep = os.path.join(d, "slip_sweep-synthetic.csv")
+        # two points off the law by a known amount, one failed run, one
+        # outside the ramp's range, one inside it but beyond the last bin's
+        # mean: the first two are compared, and the last with end_bin set
+        write_sweep(sweep, [(0.2, "ok", 0.05), (0.4, "ok", -0.03), (0.3, "failed (exit 1)", 0.0), (0.8, "ok", 0.0),
+                            (0.595, "ok", 0.0)])
+        c = ramp.ramp_curve(runio.read_traction(os.path.join(d, "traction.csv")), bins=14)
+        diffs = ramp.compare(c, ramp.fixed_points([sweep]))
+        assert [round(x["slip"], 3) for x in diffs] == [0.2, 0.4, 0.595], diffs
+        assert [x["end_bin"] for x in diffs] == [0, 0, 1], diffs
+        for x, off in zip(diffs, (0.05, -0.03)):
+            for k in ("TH_W", "TR_W", "TP_W"):
+                assert abs(x["diff_" + k] + off) < 5e-3, (k, x)
+            assert abs(x["diff_sinkage_mm"] + 1.0) < 0.05, x
+        p = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "post", "ramp.py"), d, "--bins", "14",
+                            "--fixed", sweep], capture_output=True, text=True)
+        assert p.returncode == 0, p.stderr
+        with open(os.path.join(d, "ramp-vs-fixed.csv")) as f:
+            assert len(f.read().splitlines()) == 4, "ramp-vs-fixed.csv rows"
+        print("  " + p.stdout.strip().replace("\n", "\n  "))
+
+
+CASES = {f.__name__: f for f in (recovers_law, no_travel_refused, compares_with_fixed)}
 
 if __name__ == "__main__":
     for name in sys.argv[1:] or list(CASES):

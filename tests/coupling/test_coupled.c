@@ -304,6 +304,16 @@ static int tire_small_runs(void)
     ENSURE_MSG(dem_ex == fem_ex && dem_ex == rows, "exchanges: DEM %g, FEM %g, traction.csv %d rows", dem_ex, fem_ex,
                rows);
     ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"\""));
+    /* The FEM's cost, from its profile: the advance's CPU time is part of
+     * the loop's, and fem_server being one thread, no more than its wall time. */
+    double adv = 0, adv_cpu = 0, loop = 0, loop_cpu = 0;
+    ENSURE(record_num(l.out, "fem_run.json", "advance_s", &adv) == 0 &&
+           record_num(l.out, "fem_run.json", "advance_cpu_s", &adv_cpu) == 0 &&
+           record_num(l.out, "fem_run.json", "loop_s", &loop) == 0 &&
+           record_num(l.out, "fem_run.json", "loop_cpu_s", &loop_cpu) == 0);
+    ENSURE_MSG(adv_cpu > 0 && adv_cpu <= loop_cpu && adv <= loop, "advance %g s (CPU %g s), loop %g s (CPU %g s)", adv,
+               adv_cpu, loop, loop_cpu);
+    ENSURE_MSG(adv_cpu <= adv * 1.01 + 0.01, "advance: CPU %g s above its wall time %g s", adv_cpu, adv);
     ENSURE(shm_clean(&l));
     return 0;
 }

@@ -50,7 +50,7 @@ extern const char *const fem_stage_names[FEM_STAGE_COUNT];
 typedef struct fem_profile {
     double seconds[FEM_STAGE_COUNT]; /* s of wall time per stage, summed over the exchanges */
     double cpu_seconds[FEM_STAGE_COUNT]; /* s of the process's CPU time per stage (fem_server is one thread;
-                                            receive's includes the spin of the wait) */
+                                            receive's includes the wait's spin) */
     long exchanges;                  /* exchanges timed */
 } fem_profile;
 

@@ -407,15 +407,6 @@ cleanup:
         char rec_path[1100];
         snprintf(rec_path, sizeof rec_path, "%s/fem_run.json", o->out);
         cm_runrec_num(&rec, "exchanges", (double)c.n);
-        if (c.prof.exchanges > 0) { /* the exchange loop's profile: the FEM's own cost, wall and CPU */
-            double wall = 0, cpu = 0;
-            for (int k = 0; k < FEM_STAGE_COUNT; k++)
-                wall += c.prof.seconds[k], cpu += c.prof.cpu_seconds[k];
-            cm_runrec_num(&rec, "loop_s", wall);
-            cm_runrec_num(&rec, "loop_cpu_s", cpu);
-            cm_runrec_num(&rec, "advance_s", c.prof.seconds[FEM_STAGE_ADVANCE]);
-            cm_runrec_num(&rec, "advance_cpu_s", c.prof.cpu_seconds[FEM_STAGE_ADVANCE]);
-        }
         cm_runrec_num(&rec, "exit_code", exit_code);
         cm_runrec_num(&rec, "signal", g_sig->stop ? g_sig->stop : g_sig->interrupt);
         cm_runrec_text(&rec, "error", exit_code == 0 ? "" : peer_msg ? peer_msg : err.msg);

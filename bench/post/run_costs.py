@@ -9,7 +9,7 @@ scene.sets), added_mass_fraction, fem dt and dt_limit (fem_run.json),
 exchanges, simulated time (traction.csv's last t), the interface works seen
 by each side at the end and their gap relative to the larger (traction.csv
 W_dem, W_fem), the FEM's advance and loop wall and CPU seconds
-(fem_run.json, from fem_server's profile), the advance's CPU seconds per
+(fem_server's profile, wheel.h5's profile_<stage>_s and _cpu_s), the advance's CPU seconds per
 simulated second, the run's wall time (run_info.json, slip_sweep's), and
 the tire's compression under the axle and lowest-point deflection
 (bench/post/tire_deflection.py) when the run reached its steady part.
@@ -18,6 +18,8 @@ import csv
 import json
 import os
 import sys
+
+import h5py
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import tire_deflection  # noqa: E402
@@ -59,11 +61,19 @@ def row(label, d):
     wd, wf = float(last["W_dem"]), float(last["W_fem"])
     r.update(sim_time_s="%.5g" % t, W_dem_J="%.6g" % wd, W_fem_J="%.6g" % wf,
              W_gap_rel="%.3g" % ((wf - wd) / max(abs(wd), abs(wf))) if max(abs(wd), abs(wf)) > 0 else "0")
-    for k in ("advance_s", "advance_cpu_s", "loop_s", "loop_cpu_s"):
-        if k in fr:
-            r[k] = "%.1f" % fr[k]
-    if "advance_cpu_s" in fr and t > 0:
-        r["advance_cpu_per_sim_s"] = "%.0f" % (fr["advance_cpu_s"] / t)
+    prof = {}
+    with h5py.File(os.path.join(d, "wheel.h5"), "r") as w:  # fem_server's profile: attributes of "/"
+        for k, v in w.attrs.items():
+            if k.startswith("profile_") and k.endswith("_s"):
+                prof[k] = float(v)
+    if "profile_advance_cpu_s" in prof:
+        stages = [k for k in prof if not k.endswith("_cpu_s")]
+        r["advance_s"] = "%.1f" % prof["profile_advance_s"]
+        r["advance_cpu_s"] = "%.1f" % prof["profile_advance_cpu_s"]
+        r["loop_s"] = "%.1f" % sum(prof[k] for k in stages)
+        r["loop_cpu_s"] = "%.1f" % sum(prof[k[:-2] + "_cpu_s"] for k in stages)
+        if t > 0:
+            r["advance_cpu_per_sim_s"] = "%.0f" % (prof["profile_advance_cpu_s"] / t)
     info = os.path.join(d, "run_info.json")
     if os.path.exists(info):
         r["run_wall_s"] = "%.0f" % json.load(open(info))["wall_s"]

@@ -398,12 +398,13 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
 
 /* ---- the pipeline ---------------------------------------------------------------------------------------- */
 
-/* Times one stage into the profile; its status goes to st. */
+/* Times one stage into the profile (wall and CPU time); its status goes to st. */
 #define STAGE(id, call)                                                                                        \
     do {                                                                                                       \
-        double t0_ = cm_now();                                                                                 \
+        double t0_ = cm_now(), c0_ = cm_cpu_now();                                                             \
         st = (call);                                                                                           \
         c->prof.seconds[id] += cm_now() - t0_;                                                                 \
+        c->prof.cpu_seconds[id] += cm_cpu_now() - c0_;                                                         \
     } while (0)
 /* The same, and the exchange ends there unless the stage let it go on. */
 #define STAGE_OR_RETURN(id, call)                                                                              \
@@ -447,15 +448,16 @@ fem_exchange_status fem_exchange(fem_coupled *c, cm_error *err)
 
 void fem_profile_print(const fem_profile *p)
 {
-    double total = 0;
+    double total = 0, total_cpu = 0;
     for (int k = 0; k < FEM_STAGE_COUNT; k++)
-        total += p->seconds[k];
-    cm_log_info("profile of %ld exchanges (wall time per stage; receive is the wait for the DEM):", p->exchanges);
+        total += p->seconds[k], total_cpu += p->cpu_seconds[k];
+    cm_log_info("profile of %ld exchanges (wall time per stage, receive is the wait for the DEM; CPU time beside it):",
+                p->exchanges);
     for (int k = 0; k < FEM_STAGE_COUNT; k++)
-        cm_log_info("  %-13s %9.3f s  %5.1f %%  %9.1f us/exchange", fem_stage_names[k], p->seconds[k],
+        cm_log_info("  %-13s %9.3f s  %5.1f %%  %9.1f us/exchange  CPU %9.3f s", fem_stage_names[k], p->seconds[k],
                     total > 0 ? 100 * p->seconds[k] / total : 0.0,
-                    p->exchanges > 0 ? 1e6 * p->seconds[k] / (double)p->exchanges : 0.0);
-    cm_log_info("  %-13s %9.3f s", "total", total);
+                    p->exchanges > 0 ? 1e6 * p->seconds[k] / (double)p->exchanges : 0.0, p->cpu_seconds[k]);
+    cm_log_info("  %-13s %9.3f s  CPU %.3f s", "total", total, total_cpu);
 }
 
 int fem_profile_write(const fem_profile *p, cm_h5 *h5, cm_error *err)
@@ -465,6 +467,10 @@ int fem_profile_write(const fem_profile *p, cm_h5 *h5, cm_error *err)
     for (int k = 0; k < FEM_STAGE_COUNT && !rc; k++) {
         snprintf(name, sizeof name, "profile_%s_s", fem_stage_names[k]);
         rc = cm_h5_attr_double(h5, "/", name, p->seconds[k], err);
+        if (!rc) {
+            snprintf(name, sizeof name, "profile_%s_cpu_s", fem_stage_names[k]);
+            rc = cm_h5_attr_double(h5, "/", name, p->cpu_seconds[k], err);
+        }
     }
     return rc;
 }

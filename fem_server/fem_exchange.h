@@ -13,8 +13,9 @@
  *   send            the wheel state and flags; commit the frame
  *   record          series row, travel series, checkpoint, progress line
  *
- * Each stage's wall time is summed into fem_profile, printed at the end of a
- * run and written to wheel.h5 as attributes of "/" (profile_<stage>_s). */
+ * Each stage's wall and CPU time are summed into fem_profile, printed at the
+ * end of a run and written to wheel.h5 as attributes of "/"
+ * (profile_<stage>_s, profile_<stage>_cpu_s). */
 #ifndef FEM_EXCHANGE_H
 #define FEM_EXCHANGE_H
 
@@ -48,6 +49,8 @@ extern const char *const fem_stage_names[FEM_STAGE_COUNT];
 
 typedef struct fem_profile {
     double seconds[FEM_STAGE_COUNT]; /* s of wall time per stage, summed over the exchanges */
+    double cpu_seconds[FEM_STAGE_COUNT]; /* s of the process's CPU time per stage (fem_server is one thread;
+                                            receive's includes the wait's spin) */
     long exchanges;                  /* exchanges timed */
 } fem_profile;
 

@@ -15,6 +15,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <hdf5.h>
+
 #include "proc.h"
 #include "hertz.h"
 #include "test.h"
@@ -258,6 +260,25 @@ static int record_has(const char *dir, const char *name, const char *needle)
     return strstr(text, needle) != NULL;
 }
 
+/* A double attribute of wheel.h5's root (the profile). */
+static int wheel_attr(const char *dir, const char *name, double *v)
+{
+    char path[400];
+    snprintf(path, sizeof path, "%s/wheel.h5", dir);
+    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    if (f < 0)
+        return -1;
+    int bad = 1;
+    if (H5Aexists(f, name) > 0) {
+        hid_t a = H5Aopen(f, name, H5P_DEFAULT);
+        bad = a < 0 || H5Aread(a, H5T_NATIVE_DOUBLE, v) < 0;
+        if (a >= 0)
+            H5Aclose(a);
+    }
+    H5Fclose(f);
+    return bad ? -1 : 0;
+}
+
 static int tire_small_runs(void)
 {
     launch l;
@@ -304,6 +325,15 @@ static int tire_small_runs(void)
     ENSURE_MSG(dem_ex == fem_ex && dem_ex == rows, "exchanges: DEM %g, FEM %g, traction.csv %d rows", dem_ex, fem_ex,
                rows);
     ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"\""));
+    /* The FEM's cost, from its profile in wheel.h5: every stage has its CPU
+     * time beside its wall time; the advance's is not zero and, fem_server
+     * being one thread, no more than its wall time. */
+    double adv = -1, adv_cpu = -1, rcv_cpu = -1;
+    ENSURE(wheel_attr(l.out, "profile_advance_s", &adv) == 0 &&
+           wheel_attr(l.out, "profile_advance_cpu_s", &adv_cpu) == 0 &&
+           wheel_attr(l.out, "profile_receive_cpu_s", &rcv_cpu) == 0);
+    ENSURE_MSG(adv_cpu > 0 && rcv_cpu >= 0, "advance CPU %g s, receive CPU %g s", adv_cpu, rcv_cpu);
+    ENSURE_MSG(adv_cpu <= adv * 1.01 + 0.01, "advance: CPU %g s above its wall time %g s", adv_cpu, adv);
     ENSURE(shm_clean(&l));
     return 0;
 }

@@ -30,16 +30,6 @@ int cm_ckpt_begin_write(cm_ckpt *ck, const char *dir, const char *role, long exc
     return ck->rc;
 }
 
-static int sync_path(const char *path, int dir)
-{
-    int fd = open(path, dir ? O_RDONLY | O_DIRECTORY : O_RDONLY);
-    if (fd < 0)
-        return -1;
-    int rc = fsync(fd);
-    close(fd);
-    return rc;
-}
-
 int cm_ckpt_commit(cm_ckpt *ck)
 {
     if (ck->f) {
@@ -47,7 +37,7 @@ int cm_ckpt_commit(cm_ckpt *ck)
         if (cm_h5_close(&ck->f, &e) != CM_OK && ck->rc == CM_OK)
             ck->rc = cm_fail(ck->err, e.code, "%s", e.msg);
     }
-    if (ck->rc == CM_OK && sync_path(ck->tmp, 0) != 0)
+    if (ck->rc == CM_OK && cm_fsync_file(ck->tmp) != 0)
         ck->rc = cm_fail(ck->err, CM_ERR_IO, "syncing checkpoint %s: %s", ck->tmp, strerror(errno));
     if (ck->rc != CM_OK) {
         unlink(ck->tmp);
@@ -61,14 +51,8 @@ int cm_ckpt_commit(cm_ckpt *ck)
         ck->rc = cm_fail(ck->err, CM_ERR_IO, "renaming %s to %s: %s", ck->path, prev, strerror(errno));
     else if (rename(ck->tmp, ck->path) != 0)
         ck->rc = cm_fail(ck->err, CM_ERR_IO, "renaming %s to %s: %s", ck->tmp, ck->path, strerror(errno));
-    if (ck->rc == CM_OK) {
-        char dir[1100];
-        snprintf(dir, sizeof dir, "%s", ck->path);
-        char *slash = strrchr(dir, '/');
-        if (slash)
-            *slash = '\0';
-        sync_path(slash ? dir : ".", 1); /* the renames themselves */
-    }
+    if (ck->rc == CM_OK)
+        cm_fsync_folder_of(ck->path); /* the renames themselves */
     return ck->rc;
 }
 

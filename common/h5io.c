@@ -474,3 +474,30 @@ int cm_h5_read_array(cm_h5 *f, const char *path, cm_h5_type type, void *data, si
     H5Dclose(d);
     return rc;
 }
+
+/* ---- durable file replacement ------------------------------------------------ */
+
+static int fsync_open(const char *path, int flags)
+{
+    int fd = open(path, flags);
+    if (fd < 0)
+        return -1;
+    int rc = fsync(fd);
+    close(fd);
+    return rc;
+}
+
+int cm_fsync_file(const char *path) { return fsync_open(path, O_RDONLY); }
+
+int cm_fsync_folder_of(const char *path)
+{
+    char *dir = strdup(path);
+    if (!dir)
+        return -1;
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        *slash = '\0';
+    int rc = fsync_open(slash ? (slash == dir ? "/" : dir) : ".", O_RDONLY | O_DIRECTORY);
+    free(dir);
+    return rc;
+}

@@ -179,6 +179,12 @@ int cm_h5_reopen(const char *path, const cm_h5_def *def, long keep_through_step,
  * Written to "<path>.resume.tmp", synced and renamed over `path`. */
 int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long keep, cm_error *err);
 
+/* fsync of a file, and of the folder that holds `path` (which makes a
+ * rename in it durable): 0 or -1 with errno set. The resume's rebuild and
+ * the checkpoints (ckpt.c) replace files this way. */
+int cm_fsync_file(const char *path);
+int cm_fsync_folder_of(const char *path);
+
 /* Reopens the series `path` of a reopened file, cut back to its first `rows`
  * rows, and its CSV (cut back to the header and `rows` lines). columns as
  * for cm_h5_series_create. Fails naming the file if either holds fewer rows. */

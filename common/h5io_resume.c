@@ -423,16 +423,6 @@ static int copy_object(hid_t src, hid_t dst, const char *name, const char *file,
     return rc;
 }
 
-static int sync_path(const char *path, int dir)
-{
-    int fd = open(path, dir ? O_RDONLY | O_DIRECTORY : O_RDONLY);
-    if (fd < 0)
-        return -1;
-    int rc = fsync(fd);
-    close(fd);
-    return rc;
-}
-
 int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long keep, cm_error *err)
 {
     if (!group || !prefix || group[0] != '/')
@@ -468,21 +458,14 @@ int cm_h5_rebuild(const char *path, const char *group, const char *prefix, long 
         rc = h5io_fail(err, tmp, "closing the rebuilt results file");
     if (src >= 0)
         H5Fclose(src);
-    if (rc == CM_OK && sync_path(tmp, 0) != 0)
+    if (rc == CM_OK && cm_fsync_file(tmp) != 0)
         rc = cm_fail(err, CM_ERR_IO, "syncing %s: %s", tmp, strerror(errno));
     if (rc == CM_OK && rename(tmp, path) != 0)
         rc = cm_fail(err, CM_ERR_IO, "renaming %s to %s: %s", tmp, path, strerror(errno));
-    if (rc == CM_OK) {
-        char *dir = strdup(path);
-        char *slash = dir ? strrchr(dir, '/') : NULL;
-        if (slash)
-            *slash = '\0';
-        if (dir)
-            sync_path(slash ? (slash == dir ? "/" : dir) : ".", 1); /* the rename itself */
-        free(dir);
-    } else {
+    if (rc == CM_OK)
+        cm_fsync_folder_of(path); /* the rename itself */
+    else
         unlink(tmp);
-    }
     free(tmp);
     return rc;
 }

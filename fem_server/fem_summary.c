@@ -381,6 +381,13 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
     return CM_OK;
 }
 
+/* The text before a number (separator and key), then the number. */
+static void json_field(FILE *f, const char *before, double v)
+{
+    fputs(before, f);
+    cm_json_number(f, v);
+}
+
 static int write_json(const char *path, const fem_summary_def *d, const summary_result *r, cm_error *err)
 {
     char tmp[1200];
@@ -399,14 +406,10 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
                "\"travelled_m\": ",
             (unsigned long long)d->fem_state_hash, r->travelled ? "true" : "false", d->travel_done ? "true" : "false");
     cm_json_number(f, d->travelled);
-    fputs(",\n  \"interface_work\": {\"dem_J\": ", f);
-    cm_json_number(f, d->work_dem);
-    fputs(", \"fem_J\": ", f);
-    cm_json_number(f, d->work_fem);
-    fputs(", \"gap_max\": ", f);
-    cm_json_number(f, d->work_gap_max);
-    fputs(", \"warned_at_s\": ", f);
-    cm_json_number(f, d->work_warned_at);
+    json_field(f, ",\n  \"interface_work\": {\"dem_J\": ", d->work_dem);
+    json_field(f, ", \"fem_J\": ", d->work_fem);
+    json_field(f, ", \"gap_max\": ", d->work_gap_max);
+    json_field(f, ", \"warned_at_s\": ", d->work_warned_at);
     fputs("}", f);
     fputs(",\n  \"steady\": {\"start_time\": ", f);
     cm_json_number(f, r->t_start);
@@ -422,16 +425,11 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         const steady_stats *s = &r->q[q];
         fprintf(f, "%s\n    \"%s\": {\"unit\": \"%s\", \"mean\": ", q ? "," : "", k_names[q], k_units[q]);
         cm_json_number(f, s->mean);
-        fputs(", \"half_width\": ", f);
-        cm_json_number(f, s->half_width);
-        fputs(", \"sd\": ", f);
-        cm_json_number(f, s->sd);
-        fputs(", \"min\": ", f);
-        cm_json_number(f, s->min);
-        fputs(", \"max\": ", f);
-        cm_json_number(f, s->max);
-        fputs(", \"tau_s\": ", f);
-        cm_json_number(f, s->tau * d->interval);
+        json_field(f, ", \"half_width\": ", s->half_width);
+        json_field(f, ", \"sd\": ", s->sd);
+        json_field(f, ", \"min\": ", s->min);
+        json_field(f, ", \"max\": ", s->max);
+        json_field(f, ", \"tau_s\": ", s->tau * d->interval);
         fprintf(f, ", \"samples\": %zu, \"batches\": %d, \"short_series\": %s}", s->count, s->batches,
                 s->short_series ? "true" : "false");
     }

@@ -18,6 +18,7 @@
  * (DEM_PLAN_BLOCKS_PER_THREAD, dem_world.h, says how many there are). */
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -481,52 +482,66 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
 
 /* ---- the stage --------------------------------------------------------- */
 
-/* Candidate pair p (slots i, j) through the contact test, without a branch
- * on its outcome (in a settled bed about half the candidates touch, a coin
- * a branch predictor cannot call): the pair is written into the batch's next
- * place, which is taken only if the grains overlap; a full batch is computed
- * and added. A pair apart whose spring still holds something has it cleared
- * (rare: the pair just separated). Coincident centres (no normal) count as
- * apart. Returns 1 in contact. */
-static inline __attribute__((always_inline)) int candidate(const pair_arrays *a, const force_sums *s,
-                                                            const coef_table *ct, batch_fn batch_forces,
-                                                            pair_batch *b, int p, const int spring)
+/* Candidate pairs through the contact test, without a branch on its
+ * outcome (in a settled bed about half the candidates touch, a coin a
+ * branch predictor cannot call): each pair is written into the batch's next
+ * place, which is taken only if the grains overlap. The pairs are p = k for
+ * k in [k, ke) (own NULL), or p = own[k] below lim (a block's walk, up to
+ * its next stored event). Stops when the batch is full; returns the next k.
+ * A pair apart whose spring still holds something has it cleared (rare: the
+ * pair just separated). Coincident centres (no normal) count as apart.
+ * Nothing in the loop calls out, so the batch's count and the arrays stay
+ * in registers. */
+static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b,
+                                                       const int *restrict own, int k, const int ke, const int lim,
+                                                       const int spring)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
-    const int i = a->pi[p], j = a->pj[p];
-    const double ex = a->x[i] - a->x[j], ey = a->y[i] - a->y[j], ez = a->z[i] - a->z[j];
-    const double d2 = ex * ex + ey * ey + ez * ez, rs = a->r[i] + a->r[j];
-    const int apart = (d2 >= rs * rs) | (d2 == 0.0);
-    double *xi = a->hist + (size_t)hs * p;
-    int held = (xi[0] != 0.0) | (xi[1] != 0.0) | (xi[2] != 0.0);
-    if (spring)
-        held |= (xi[3] != 0.0) | (xi[4] != 0.0) | (xi[5] != 0.0);
-    if (apart & held) {
-        xi[0] = xi[1] = xi[2] = 0.0;
+    const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
+    const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
+    double *restrict hist = a->hist;
+    int n = b->n;
+    for (; k < ke && n < BATCH; k++) {
+        const int p = own ? own[k] : k;
+        if (own && p >= lim)
+            break;
+        const int i = pi[p], j = pj[p];
+        const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
+        const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];
+        const int apart = (d2 >= rs * rs) | (d2 == 0.0);
+        double *xi = hist + (size_t)hs * p;
+        /* held: some component != 0.0 (-0.0 is not held), from the bits
+         * without the sign: no floating-point compares */
+        uint64_t u0, u1, u2, u3 = 0, u4 = 0, u5 = 0;
+        memcpy(&u0, xi, 8), memcpy(&u1, xi + 1, 8), memcpy(&u2, xi + 2, 8);
         if (spring)
-            xi[3] = xi[4] = xi[5] = 0.0;
+            memcpy(&u3, xi + 3, 8), memcpy(&u4, xi + 4, 8), memcpy(&u5, xi + 5, 8);
+        const int held = ((u0 << 1) | (u1 << 1) | (u2 << 1) | (u3 << 1) | (u4 << 1) | (u5 << 1)) != 0;
+        if (apart & held) {
+            xi[0] = xi[1] = xi[2] = 0.0;
+            if (spring)
+                xi[3] = xi[4] = xi[5] = 0.0;
+        }
+        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = mat[i] * DEM_MAX_MATERIALS + mat[j];
+        b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
+        n += !apart;
     }
-    const int k = b->n;
-    b->p[k] = p, b->i[k] = i, b->j[k] = j, b->c[k] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
-    b->ex[k] = ex, b->ey[k] = ey, b->ez[k] = ez, b->d2[k] = d2;
-    b->n = k + !apart;
-    if (b->n == BATCH) {
-        batch_forces(a, ct, b);
-        batch_scatter(a, s, b, spring);
-        b->n = 0;
-    }
-    return !apart;
+    b->n = n;
+    return k;
 }
 
-static inline __attribute__((always_inline)) void batch_flush(const pair_arrays *a, const force_sums *s,
-                                                              const coef_table *ct, batch_fn batch_forces,
-                                                              pair_batch *b, const int spring)
+/* A batch computed and added; returns its contacts. */
+static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *a, const force_sums *s,
+                                                             const coef_table *ct, batch_fn batch_forces,
+                                                             pair_batch *b, const int spring)
 {
-    if (b->n > 0) {
+    const int n = b->n;
+    if (n > 0) {
         batch_forces(a, ct, b);
         batch_scatter(a, s, b, spring);
         b->n = 0;
     }
+    return n;
 }
 
 /* One thread: every active pair in ascending p (the plain loop). spring:
@@ -539,10 +554,12 @@ static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in,
     pair_batch b;
     b.n = 0;
     int contacts = 0;
-    for (int p = 0; p < np; p++)
-        contacts += candidate(&a, s, ct, batch_forces, &b, p, spring);
-    batch_flush(&a, s, ct, batch_forces, &b, spring);
-    return contacts;
+    for (int k = 0; k < np;) {
+        k = fill(&a, &b, NULL, k, np, INT_MAX, spring);
+        if (b.n == BATCH)
+            contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
+    }
+    return contacts + batch_flush(&a, s, ct, batch_forces, &b, spring);
 }
 
 /* The pairs of block t in ascending p, merged with the cross pairs arriving
@@ -567,16 +584,16 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
     for (; k < ke || m < me;) {
         int p = k < ke ? own[k] : INT_MAX;
         if (p_in < p) { /* a cross pair arriving at its j */
-            batch_flush(&a, s, ct, batch_forces, &b, spring);
+            contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = inc[m++];
             if (pl->con[c])
                 add_j(s, a.pj[cross[c]], pl->cf + (size_t)DEM_PAIR_F * c);
             p_in = m < me ? cross[inc[m]] : INT_MAX;
             continue;
         }
-        k++;
         if (p == p_cc) { /* own cross pair: computed in phase A */
-            batch_flush(&a, s, ct, batch_forces, &b, spring);
+            k++;
+            contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = cc++;
             if (pl->con[c]) {
                 add_i(s, a.pi[p], pl->cf + (size_t)DEM_PAIR_F * c);
@@ -585,10 +602,12 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
             p_cc = cc < ce ? cross[cc] : INT_MAX;
             continue;
         }
-        contacts += candidate(&a, s, ct, batch_forces, &b, p, spring);
+        /* own pairs up to the next event */
+        k = fill(&a, &b, own, k, ke, p_cc < p_in ? p_cc : p_in, spring);
+        if (b.n == BATCH)
+            contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
-    batch_flush(&a, s, ct, batch_forces, &b, spring);
-    return contacts;
+    return contacts + batch_flush(&a, s, ct, batch_forces, &b, spring);
 }
 
 /* Stage "pairs" for a world with shaped grains: the shaped

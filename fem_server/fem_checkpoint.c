@@ -64,6 +64,8 @@ static void visit_run(cm_ckpt *ck, fem_ckpt_run *r)
     cm_ckpt_double(ck, "/run/max_moment_mismatch", &r->max_moment_mismatch);
     cm_ckpt_double(ck, "/run/work_abs", &r->work_abs);
     cm_ckpt_double(ck, "/run/work_scale", &r->work_scale);
+    cm_ckpt_double(ck, "/run/work_gap_max", &r->work_gap_max);
+    cm_ckpt_double(ck, "/run/work_warned_at", &r->work_warned_at);
     cm_ckpt_same_u64(ck, "/run/n_nodes", r->n_nodes, "the number of interface nodes");
     cm_ckpt_f64(ck, "/run/x_prev", r->x_prev, 3 * (size_t)r->n_nodes);
     cm_ckpt_long(ck, "/run/series_rows", &r->series_rows);

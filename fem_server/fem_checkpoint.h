@@ -23,6 +23,7 @@ typedef struct fem_ckpt_run {
     double w_fem;                  /* J, interface work seen by the FEM */
     double max_force_mismatch, max_moment_mismatch;
     double work_abs, work_scale;   /* J, the interface-work guard's floor (fem_exchange.c) */
+    double work_gap_max, work_warned_at; /* the largest relative gap of the works; s, its first warning (0: none) */
     uint32_t n_nodes;
     double *x_prev;                /* 3 n_nodes: the interface positions last sent */
     size_t travel_n;               /* the travel series for the summary, FEM_CKPT_TRAVEL_COLS columns */

@@ -247,10 +247,18 @@ static fem_exchange_status stage_pack_reply(fem_coupled *c, exchange *x)
     return FEM_EXCHANGE_NEXT;
 }
 
-int fem_check_interface_work(double w_fem, double w_dem, double scale, double t, double interval, cm_error *err)
+double fem_interface_work_gap(double w_fem, double w_dem, double scale)
 {
     double gap = fabs(w_fem - w_dem), ref = fmax(fmax(fabs(w_fem), fabs(w_dem)), scale);
-    if (!(gap <= FEM_WORK_TOLERANCE * ref))
+    if (!(gap <= ref)) /* NaN, or larger than both works and the floor */
+        return isfinite(gap) && ref > 0 ? gap / ref : INFINITY;
+    return ref > 0 ? gap / ref : 0.0;
+}
+
+int fem_check_interface_work(double w_fem, double w_dem, double scale, double t, double interval, cm_error *err)
+{
+    double gap = fabs(w_fem - w_dem);
+    if (!(fem_interface_work_gap(w_fem, w_dem, scale) <= FEM_WORK_TOLERANCE))
         return cm_fail(err, CM_ERR_NUMERIC,
                        "coupling unstable at t = %.4f s: the interface work seen by the FEM (%.3g J) and by the DEM "
                        "(%.3g J) differ by %.3g J, more than %.0f %% of the larger and of the contacts' energy scale "
@@ -298,8 +306,17 @@ static int stage_check_work(fem_coupled *c, exchange *x, cm_error *err)
     fem_get_energy(c->model, &x->en);
     update_work_scale(c, x->en.elastic, x->info[IPC_INFO_CONTACT_ENERGY]);
     c->w_dem_last = x->info[IPC_INFO_DEM_WORK];
-    return fem_check_interface_work(c->w_fem, c->w_dem_last, c->work_scale, x->time + c->interval, c->interval,
-                                    err);
+    const double t = x->time + c->interval, gap = fem_interface_work_gap(c->w_fem, c->w_dem_last, c->work_scale);
+    c->work_gap_max = gap > c->work_gap_max ? gap : c->work_gap_max;
+    if (gap > FEM_WORK_WARN && c->work_warned_at == 0.0 && gap <= FEM_WORK_TOLERANCE) {
+        c->work_warned_at = t;
+        cm_log_warn("t = %.4f s: the interface work seen by the FEM (%.4g J) and by the DEM (%.4g J) are %.1f %% "
+                    "apart (a stable exchange stays below 1 %%; the run stops at %.0f %%): the exchange interval "
+                    "%.3g s may be too long for the lightest interface nodes (coupling.dt, or "
+                    "fem.interface_mass_min)",
+                    t, c->w_fem, c->w_dem_last, 100 * gap, 100 * FEM_WORK_TOLERANCE, c->interval);
+    }
+    return fem_check_interface_work(c->w_fem, c->w_dem_last, c->work_scale, t, c->interval, err);
 }
 
 /* send: the wheel's state and the flags, then the frame goes. */
@@ -382,6 +399,7 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
         fem_ckpt_run cr = {.exchange = c->n, .drive = &c->ds, .w_fem = c->w_fem,
                            .max_force_mismatch = c->max_force_mismatch, .max_moment_mismatch = c->max_moment_mismatch,
                            .work_abs = c->work_abs, .work_scale = c->work_scale,
+                           .work_gap_max = c->work_gap_max, .work_warned_at = c->work_warned_at,
                            .n_nodes = c->nn, .x_prev = c->x_prev, .travel_n = tv->n,
                            .travel = {tv->col[SER_TH], tv->col[SER_TR], tv->col[SER_TP], tv->col[SER_SINK],
                                       tv->col[SER_SLIP], tv->col[SER_FX], tv->col[SER_MY]},

@@ -105,6 +105,8 @@ typedef struct fem_coupled {
     double w_dem_last;            /* J, the DEM's, as of its last frame */
     double work_abs;              /* J, sum over the exchanges of |the FEM's interface work| */
     double work_scale;            /* J, the guard's floor (fem_exchange.c, update_work_scale) */
+    double work_gap_max;          /* the largest relative gap of the two works so far (fem_interface_work_gap) */
+    double work_warned_at;        /* s, when that gap first passed FEM_WORK_WARN (warned once); 0: not yet */
     double elastic0;              /* J, the tire's elastic energy before any grain touched it */
     double max_force_mismatch, max_moment_mismatch; /* relative, nodal forces vs contact totals */
     int stop_sent;
@@ -128,8 +130,18 @@ fem_exchange_status fem_exchange(fem_coupled *c, cm_error *err);
 
 /* The interface-work guard (issue 16): fails when the FEM's and the DEM's
  * interface work differ by more than FEM_WORK_TOLERANCE of the larger of the
- * two and of the floor `scale` (J). Pure, for tests. */
+ * two and of the floor `scale` (J). Pure, for tests. A gap above
+ * FEM_WORK_WARN is warned about once in the log, when it happens, and in the
+ * summary: a stable exchange stays below 1 % (the largest gap over a run:
+ * 0.64 % on the default scene and on tests/coupling's small tire, early in
+ * the contact; 0.05 % and 0.002 % at their ends), while a drifting one grows
+ * for a while before the guard stops it (tet10 without interface_mass_min:
+ * 0.4 % at t = 0.29 s, 12 % at 0.39 s). */
 #define FEM_WORK_TOLERANCE 0.25
+#define FEM_WORK_WARN 0.02
+/* |w_fem - w_dem| over the larger of |w_fem|, |w_dem| and scale: the guard's
+ * measure (infinity when a work is not finite). */
+double fem_interface_work_gap(double w_fem, double w_dem, double scale);
 int fem_check_interface_work(double w_fem, double w_dem, double scale, double t, double interval,
                              cm_error *err);
 

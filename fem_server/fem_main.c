@@ -90,7 +90,9 @@ static int finish_run(const options *o, fem_coupled *c, cm_h5 *h5, double lug_pe
                             .interval = c->interval, .lug_period = lug_period, .slip = drive->slip,
                             .torque = drive->torque, .drawbar = drive->drawbar,
                             .travel_distance = drive->travel_distance, .travelled = c->ds.travelled,
-                            .travel_done = c->ds.phase == DRIVE_DONE, .fem_state_hash = fem_state_hash(c->model)};
+                            .travel_done = c->ds.phase == DRIVE_DONE, .fem_state_hash = fem_state_hash(c->model),
+                            .work_dem = w_dem, .work_fem = w_fem, .work_gap_max = c->work_gap_max,
+                            .work_warned_at = c->work_warned_at, .work_warn = FEM_WORK_WARN};
     if ((rc = fem_summary_write(&sdef, err)) < 0)
         return rc;
     /* [/traction] */
@@ -356,6 +358,8 @@ static int run(const options *o)
         c.max_moment_mismatch = cr.max_moment_mismatch;
         c.work_abs = cr.work_abs;
         c.work_scale = cr.work_scale;
+        c.work_gap_max = cr.work_gap_max;
+        c.work_warned_at = cr.work_warned_at;
         series_rows = cr.series_rows;
         c.n = resume_exchange + 1;
         cm_log_info("resuming from %s after exchange %ld (t = %.6f s)", ckpt_path, resume_exchange, fem_time(model));

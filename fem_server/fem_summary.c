@@ -123,6 +123,7 @@ typedef struct summary_result {
     char warning[600]; /* the load check */
     char drift[400];   /* the sinkage check: still changing over the averaged part */
     char short_travel[400]; /* the travel stopped before travel_distance */
+    char work[500];    /* the two sides' interface works parted */
 } summary_result;
 
 static const char *const k_control[] = {"slip", "torque", "drawbar"};
@@ -274,6 +275,22 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
         free(tr[k]);
 }
 
+/* The interface-work check: a gap of the two sides' works above work_warn
+ * at any time of the run. */
+static void check_work(const fem_summary_def *d, summary_result *r)
+{
+    if (d->work_warn > 0 && d->work_gap_max > d->work_warn) {
+        double wmax = fmax(fabs(d->work_fem), fabs(d->work_dem));
+        snprintf(r->work, sizeof r->work,
+                 "the interface work seen by the FEM and by the DEM were up to %.1f %% apart (%.0f %% first passed "
+                 "at t = %.4f s; at the end %.4g J against %.4g J, %.2g %% of the larger): energy the exchange "
+                 "created or destroyed on the tire's surface, where a stable exchange stays below 1 %%. Shorten "
+                 "coupling.dt or raise fem.interface_mass_min before trusting these numbers",
+                 100 * d->work_gap_max, 100 * d->work_warn, d->work_warned_at, d->work_fem, d->work_dem,
+                 wmax > 0 ? 100 * fabs(d->work_fem - d->work_dem) / wmax : 0.0);
+    }
+}
+
 static void log_result(const fem_summary_def *d, const summary_result *r)
 {
     char what[160];
@@ -309,6 +326,8 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
         cm_log_warn("%s", r->drift);
     if (r->short_travel[0])
         cm_log_warn("%s", r->short_travel);
+    if (r->work[0])
+        cm_log_warn("%s", r->work);
 }
 
 static int write_h5(const char *path, const fem_summary_def *d, const summary_result *r, cm_error *err)
@@ -338,7 +357,9 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
                attr_double(g, "target_load", d->target_load) || attr_string(g, "control", k_control[d->control]) ||
                attr_string(g, "load_warning", r->warning) || attr_string(g, "drift_warning", r->drift) ||
                attr_double(g, "travel_completed", d->travel_done) || attr_double(g, "travelled_m", d->travelled) ||
-               attr_string(g, "travel_warning", r->short_travel);
+               attr_string(g, "travel_warning", r->short_travel) || attr_string(g, "work_warning", r->work) ||
+               attr_double(g, "interface_work_dem", d->work_dem) || attr_double(g, "interface_work_fem", d->work_fem) ||
+               attr_double(g, "interface_work_gap_max", d->work_gap_max);
         if (r->travelled)
             bad |= write_matrix(g, "quantities", &rows[0][0], NQ, NSTAT) ||
                    write_matrix(g, "convergence", &r->conv[0][0], 4, 11) ||
@@ -360,6 +381,13 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
     return CM_OK;
 }
 
+/* The text before a number (separator and key), then the number. */
+static void json_field(FILE *f, const char *before, double v)
+{
+    fputs(before, f);
+    cm_json_number(f, v);
+}
+
 static int write_json(const char *path, const fem_summary_def *d, const summary_result *r, cm_error *err)
 {
     char tmp[1200];
@@ -378,6 +406,11 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
                "\"travelled_m\": ",
             (unsigned long long)d->fem_state_hash, r->travelled ? "true" : "false", d->travel_done ? "true" : "false");
     cm_json_number(f, d->travelled);
+    json_field(f, ",\n  \"interface_work\": {\"dem_J\": ", d->work_dem);
+    json_field(f, ", \"fem_J\": ", d->work_fem);
+    json_field(f, ", \"gap_max\": ", d->work_gap_max);
+    json_field(f, ", \"warned_at_s\": ", d->work_warned_at);
+    fputs("}", f);
     fputs(",\n  \"steady\": {\"start_time\": ", f);
     cm_json_number(f, r->t_start);
     fputs(", \"end_time\": ", f);
@@ -392,16 +425,11 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         const steady_stats *s = &r->q[q];
         fprintf(f, "%s\n    \"%s\": {\"unit\": \"%s\", \"mean\": ", q ? "," : "", k_names[q], k_units[q]);
         cm_json_number(f, s->mean);
-        fputs(", \"half_width\": ", f);
-        cm_json_number(f, s->half_width);
-        fputs(", \"sd\": ", f);
-        cm_json_number(f, s->sd);
-        fputs(", \"min\": ", f);
-        cm_json_number(f, s->min);
-        fputs(", \"max\": ", f);
-        cm_json_number(f, s->max);
-        fputs(", \"tau_s\": ", f);
-        cm_json_number(f, s->tau * d->interval);
+        json_field(f, ", \"half_width\": ", s->half_width);
+        json_field(f, ", \"sd\": ", s->sd);
+        json_field(f, ", \"min\": ", s->min);
+        json_field(f, ", \"max\": ", s->max);
+        json_field(f, ", \"tau_s\": ", s->tau * d->interval);
         fprintf(f, ", \"samples\": %zu, \"batches\": %d, \"short_series\": %s}", s->count, s->batches,
                 s->short_series ? "true" : "false");
     }
@@ -431,8 +459,8 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
         fputc(']', f);
     }
     fputs("]},\n  \"warnings\": [", f);
-    const char *warnings[] = {r->warning, r->drift, r->short_travel};
-    for (int k = 0, any = 0; k < 3; k++)
+    const char *warnings[] = {r->warning, r->drift, r->short_travel, r->work};
+    for (int k = 0, any = 0; k < 4; k++)
         if (warnings[k][0]) {
             fputs(any++ ? ", " : "", f);
             cm_json_string(f, warnings[k]);
@@ -459,11 +487,14 @@ int fem_summary_write(const fem_summary_def *d, cm_error *err)
         rc = cm_fail(err, CM_ERR_NOMEM, "summary: out of memory");
     if (rc == CM_OK) {
         compute(d, col, n, r);
+        check_work(d, r);
         if (r->travelled)
             log_result(d, r);
         else
             cm_log_info("the wheel never reached the travel phase (target load %g N): no traction summary",
                         d->target_load);
+        if (!r->travelled && r->work[0])
+            cm_log_warn("%s", r->work);
         if ((rc = write_h5(h5path, d, r, err)) == CM_OK && (rc = write_json(jpath, d, r, err)) == CM_OK)
             rc = r->warning[0] ? FEM_SUMMARY_LOAD_OFF : CM_OK;
     }

@@ -54,6 +54,11 @@ typedef struct fem_summary_def {
     double travelled;       /* m, travelled when the run ended */
     int travel_done;        /* the travel reached travel_distance (else interrupted or run.end_time) */
     uint64_t fem_state_hash;
+    /* the interface work of the grains on the tire (fem_exchange.c's guard):
+     * seen by the DEM and by the FEM at the end (J), their largest relative
+     * gap over the run, when it first passed work_warn (s; 0: never), and
+     * the gap above which the summary warns (0: no check) */
+    double work_dem, work_fem, work_gap_max, work_warned_at, work_warn;
 } fem_summary_def;
 
 enum { FEM_SUMMARY_LOAD_OFF = 1 }; /* warning: the steady load is > 10 % from target_load */

@@ -55,6 +55,11 @@ static int make_world(int threads, const char *dir, dem_world **w, cm_error *err
     d.dt = 1e-5;
     d.max_grains = 20000;
     d.threads = threads;
+    /* DEM_BENCH_SKIN (m): the neighbour skin of the run (default: dem's
+     * 0.3 r_min, which bench/dem/run gives LIGGGHTS too) */
+    const char *skin = getenv("DEM_BENCH_SKIN");
+    if (skin)
+        d.skin = atof(skin);
     int rc = dem_world_create(&d, 1, &SOIL, w, err);
     if (rc)
         return rc;

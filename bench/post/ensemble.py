@@ -17,8 +17,21 @@ run's own time scatter. Over N runs (seeds):
   iterated); if the within-run part dominates, longer travel helps more than
   seeds.
 
-usage: ensemble.py RUN_DIR... [--target Q=H ...] [--json OUT]
+A modelling choice against a base (--against BASE_RUN...): run i of both
+lists on the same bed (the same seed, matched by folder name: ./run --seeds
+writes seed1..N), so the difference d_i = variant_i - base_i cancels the
+bed's own effect, which dominates the scatter of either ensemble alone:
+
+* mean difference over the beds, 95 % interval t_{N-1} s_d / sqrt(N), s_d
+  the standard deviation of the d_i (what is left: each run's averaging and
+  how the choice interacts with the bed);
+* "resolved" when the interval excludes zero, "within the noise" otherwise;
+  and the unpaired interval (both ensembles' half-widths in quadrature) for
+  what the same seeds would give unpaired.
+
+usage: ensemble.py RUN_DIR... [--target Q=H ...] [--against BASE_DIR...] [--json OUT]
    e.g. ensemble.py out/default/seed1 out/default/seed2 out/default/seed3 --target T_P_per_W=0.02
+        ensemble.py out/rigid-seeds/seed{1,2,3} --against out/default-seeds/seed{1,2,3}
 """
 import argparse
 import json
@@ -98,6 +111,38 @@ def analyse(summaries, targets=None):
     return res
 
 
+def paired(variant, base):
+    """{quantity: paired difference stats} of two lists of summaries, run i of both on the same bed."""
+    if len(variant) != len(base):
+        raise ValueError("paired comparison: %d runs against %d base runs" % (len(variant), len(base)))
+    res = {}
+    for q in REPORTED:
+        pairs = [(v["quantities"][q], b["quantities"][q]) for v, b in zip(variant, base)
+                 if v.get("travelled") and b.get("travelled") and q in v.get("quantities", {})
+                 and q in b.get("quantities", {})]
+        if len(pairs) < 2:
+            continue
+        d = np.array([v["mean"] - b["mean"] for v, b in pairs])
+        n = len(d)
+        hw = t95(n - 1) * float(d.std(ddof=1)) / math.sqrt(n)
+        ev = ensemble([v["mean"] for v, _ in pairs], [v["half_width"] for v, _ in pairs])
+        eb = ensemble([b["mean"] for _, b in pairs], [b["half_width"] for _, b in pairs])
+        res[q] = {"pairs": n, "difference": float(d.mean()), "half_width": hw,
+                  "unpaired_half_width": math.hypot(ev["half_width"], eb["half_width"]),
+                  "variant_mean": ev["mean"], "base_mean": eb["mean"],
+                  "resolved": bool(abs(float(d.mean())) > hw), "unit": pairs[0][0].get("unit", "")}
+    return res
+
+
+def report_paired(res, out=sys.stdout):
+    out.write("against the base, paired by bed (variant - base, 95 %% intervals over %d beds):\n"
+              % max([e["pairs"] for e in res.values()] or [0]))
+    for q, e in res.items():
+        out.write("  %-14s %+12.5g %-2s +- %-10.3g (unpaired +- %.3g): %s\n" % (
+            q, e["difference"], e["unit"] if e["unit"] != "1" else "", e["half_width"], e["unpaired_half_width"],
+            "resolved" if e["resolved"] else "within the noise"))
+
+
 def load_summaries(dirs):
     out = []
     for d in dirs:
@@ -126,7 +171,16 @@ def main(argv=None):
     ap.add_argument("runs", nargs="+")
     ap.add_argument("--target", action="append", default=[], help="QUANTITY=HALF_WIDTH, e.g. T_P_per_W=0.02")
     ap.add_argument("--json", help="write the result here")
+    ap.add_argument("--against", nargs="+", metavar="BASE_DIR",
+                    help="base runs on the same beds, in the same order (folder names must match pairwise)")
     a = ap.parse_args(argv)
+    if a.against:
+        if len(a.against) != len(a.runs):
+            ap.error("--against: %d base runs for %d runs" % (len(a.against), len(a.runs)))
+        for r, b in zip(a.runs, a.against):
+            rn, bn = os.path.basename(os.path.normpath(r)), os.path.basename(os.path.normpath(b))
+            if rn != bn:
+                ap.error("--against: %s and %s are not the same bed (folder names %s and %s differ)" % (r, b, rn, bn))
     targets = {}
     for t in a.target:
         k, _, v = t.partition("=")
@@ -134,11 +188,17 @@ def main(argv=None):
             targets[k] = float(v)
         except ValueError:
             ap.error("--target %s: expected QUANTITY=NUMBER" % t)
-    res = analyse(load_summaries(a.runs), targets)
+    summaries = load_summaries(a.runs)
+    res = analyse(summaries, targets)
     report(res)
+    out = {"runs": a.runs, "quantities": res}
+    if a.against:
+        diff = paired(summaries, load_summaries(a.against))
+        report_paired(diff)
+        out.update(against=a.against, difference=diff)
     if a.json:
         with open(a.json, "w") as f:
-            json.dump({"runs": a.runs, "quantities": res}, f, indent=1, default=str)
+            json.dump(out, f, indent=1, default=str)
     return 0
 
 

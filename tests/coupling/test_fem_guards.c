@@ -80,6 +80,15 @@ static int work_guard_relative(void)
     ENSURE(fem_check_interface_work(0.03, -0.03, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
     /* NaN never passes. */
     ENSURE(fem_check_interface_work(NAN, 0.1, 0.08, 0.1, 1e-5, &err) == CM_ERR_NUMERIC);
+    /* The measure the guard and its warning use: the gap over the larger
+     * work or the floor. */
+    ENSURE(fabs(fem_interface_work_gap(-0.458, -1.337, 0.17) - 0.879 / 1.337) < 1e-12);
+    ENSURE(fabs(fem_interface_work_gap(1e-4, -1e-4, 0.08) - 2e-4 / 0.08) < 1e-12);
+    ENSURE(fem_interface_work_gap(0.0, 0.0, 0.0) == 0.0);
+    ENSURE(isinf(fem_interface_work_gap(NAN, 0.1, 0.08)) && isinf(fem_interface_work_gap(1e-3, 0.0, 0.0)) == 0);
+    ENSURE(fem_interface_work_gap(1e-3, 0.0, 0.0) == 1.0);
+    /* the warning sits between a stable exchange (< 1 %) and the guard */
+    ENSURE(FEM_WORK_WARN > 0.01 && FEM_WORK_WARN < FEM_WORK_TOLERANCE);
     return 0;
 }
 

@@ -181,6 +181,7 @@ static int read_summary_json(const char *dir, char *buf, size_t len)
     ENSURE(jf);
     size_t got = fread(buf, 1, len - 1, jf);
     fclose(jf);
+    ENSURE_MSG(got < len - 1, "%s: larger than the test's buffer (%zu bytes)", jpath, len);
     buf[got] = '\0';
     return 0;
 }
@@ -245,7 +246,7 @@ static int summary_of_synthetic_run(void)
     ENSURE_MSG(conv[3][6] / conv[0][6] > 0.3 && conv[3][6] / conv[0][6] < 0.75, "quarter %g, all %g", conv[0][6],
                conv[3][6]);
     /* summary.json beside it says the same */
-    char buf[8192];
+    char buf[16384];
     ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
     ENSURE(strstr(buf, "\"T_P_per_W\"") && strstr(buf, "\"warnings\": [\"the steady load is 150"));
     /* on target: no warning */
@@ -277,12 +278,23 @@ static int summary_sinkage_drift(void)
     printf("  %s\n", drift);
     ENSURE_MSG(warn[0] == '\0', "%s", warn);
     ENSURE_MSG(strstr(drift, "not steady") && strstr(drift, "sinking"), "%s", drift);
-    char buf[8192];
+    char buf[16384];
     ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
     ENSURE(strstr(buf, "\"warnings\": [\"the sinkage is not steady"));
     snprintf(buf, sizeof buf, "rm -rf %s", dir);
     ENSURE(system(buf) == 0);
     return 0;
+}
+
+/* The summary's settings for the synthetic run of write_synthetic: its
+ * whole travel, not yet done (the tests set what they check). */
+static fem_summary_def synthetic_def(const char *dir)
+{
+    const double travelled = syn_v * (SYN_N - 1) * syn_dt;
+    return (fem_summary_def){.out_dir = dir, .scene = "synthetic", .control = DRIVE_CONTROL_SLIP,
+                             .motion = DRIVE_LOAD_TRAVEL, .target_load = syn_W, .radius = syn_R,
+                             .lug_period = 2 * M_PI / 16, .interval = syn_dt, .slip = 0.1,
+                             .travel_distance = travelled, .travelled = travelled, .travel_done = 0};
 }
 
 /* A run that stopped short of its travel (interrupted, or run.end_time
@@ -295,11 +307,9 @@ static int summary_short_travel(void)
     ENSURE(mkdtemp(dir));
     ENSURE(write_synthetic(dir, 0.0) == 0);
     cm_error err = {0};
-    fem_summary_def d = {.out_dir = dir, .scene = "synthetic", .control = DRIVE_CONTROL_SLIP,
-                         .motion = DRIVE_LOAD_TRAVEL, .target_load = syn_W, .radius = syn_R,
-                         .lug_period = 2 * M_PI / 16, .interval = syn_dt, .slip = 0.1,
-                         .travel_distance = 2.5, .travelled = syn_v * (SYN_N - 1) * syn_dt, .travel_done = 0};
-    char warn[400], buf[8192];
+    fem_summary_def d = synthetic_def(dir);
+    d.travel_distance = 2.5;
+    char warn[400], buf[16384];
     for (int done = 0; done <= 1; done++) {
         d.travel_done = done;
         ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
@@ -319,6 +329,42 @@ static int summary_short_travel(void)
     return 0;
 }
 
+/* The interface-work check: a gap of the two sides' works above work_warn
+ * at some time of the run warns in summary.json and wheel.h5, with the
+ * worst gap and when it started; below it, nothing. */
+static int summary_work_warning(void)
+{
+    char dir[] = "/tmp/fem_summary_work_XXXXXX";
+    ENSURE(mkdtemp(dir));
+    ENSURE(write_synthetic(dir, 0.0) == 0);
+    cm_error err = {0};
+    fem_summary_def d = synthetic_def(dir);
+    d.travel_done = 1, d.work_dem = -2.0, d.work_fem = -2.1, d.work_warn = 0.02;
+    char warn[600], buf[16384];
+    const double gaps[] = {0.005, 0.02, 0.12};
+    for (int k = 0; k < 3; k++) {
+        d.work_gap_max = gaps[k];
+        d.work_warned_at = gaps[k] > d.work_warn ? 0.29 : 0.0;
+        ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
+        ENSURE(read_summary_attr(dir, "work_warning", warn, sizeof warn) == 0);
+        ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
+        ENSURE_MSG(strstr(buf, "\"interface_work\": {\"dem_J\": -2, \"fem_J\": -2.1"), "%s", buf);
+        if (gaps[k] > d.work_warn) {
+            printf("  %s\n", warn);
+            ENSURE_MSG(strstr(warn, "up to 12.0 % apart") && strstr(warn, "at t = 0.2900 s") &&
+                           strstr(warn, "4.8 % of the larger") && strstr(warn, "coupling.dt"),
+                       "%s", warn);
+            ENSURE(strstr(buf, "\"warnings\": [\"the interface work seen by the FEM"));
+        } else { /* at the threshold or below: no warning */
+            ENSURE_MSG(warn[0] == '\0', "%s", warn);
+            ENSURE(strstr(buf, "\"warnings\": []"));
+        }
+    }
+    snprintf(buf, sizeof buf, "rm -rf %s", dir);
+    ENSURE(system(buf) == 0);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"iat_of_ar1", iat_of_ar1},
     {"coverage_correlated", coverage_correlated},
@@ -326,6 +372,7 @@ static const test_case tests[] = {
     {"summary_of_synthetic_run", summary_of_synthetic_run},
     {"summary_sinkage_drift", summary_sinkage_drift},
     {"summary_short_travel", summary_short_travel},
+    {"summary_work_warning", summary_work_warning},
 };
 
 int main(int argc, char **argv)

@@ -95,6 +95,53 @@ def reads_summaries_from_runs():
     ensure(p.returncode != 0 and dirs[1] in p.stderr, p.stderr)
 
 
+def paired_difference():
+    # a choice that shifts T_P/W by delta on every bed, beds scattering 10x
+    # more than the runs' own averaging: the paired interval covers delta at
+    # its stated 95 % and is far narrower than the unpaired one
+    rng = random.Random(12)
+    delta, n, sd_bed, se_run = 0.015, 4, 0.04, 0.004
+    draws, covered, resolved, ratio = 3000, 0, 0, []
+    for _ in range(draws):
+        beds = [rng.gauss(0, sd_bed) for _ in range(n)]
+        base = [summary(-0.1 + b + rng.gauss(0, se_run), 1.96 * se_run) for b in beds]
+        var = [summary(-0.1 + delta + b + rng.gauss(0, se_run), 1.96 * se_run) for b in beds]
+        e = ensemble.paired(var, base)["T_P_per_W"]
+        covered += abs(e["difference"] - delta) <= e["half_width"]
+        resolved += e["resolved"]
+        ratio.append(e["half_width"] / e["unpaired_half_width"])
+    rate = covered / draws
+    print("  paired: covered %.3f, resolved %.3f, paired/unpaired half-width %.2f"
+          % (rate, resolved / draws, sorted(ratio)[draws // 2]))
+    ensure(0.935 <= rate <= 0.965, rate)   # binomial sd at 3000 draws: 0.004
+    ensure(sorted(ratio)[draws // 2] < 0.2, "pairing did not cancel the beds")
+    # no effect: "resolved" only at the false-alarm rate
+    false = sum(ensemble.paired(*[[summary(b + rng.gauss(0, se_run), 0.01) for b in beds] for _ in range(2)])
+                ["T_P_per_W"]["resolved"] for beds in ([rng.gauss(0, sd_bed) for _ in range(n)]
+                                                      for _ in range(draws)))
+    ensure(0.035 <= false / draws <= 0.065, false / draws)
+    # the command line pairs folders by name and refuses a mismatch
+    tmp = tempfile.mkdtemp()
+    for side, shift in (("base", 0.0), ("var", 0.5)):
+        for k, m in enumerate((1.0, 2.0, 4.0)):
+            d = os.path.join(tmp, side, "seed%d" % (k + 1))
+            os.makedirs(d)
+            with open(os.path.join(d, "summary.json"), "w") as f:
+                json.dump(summary(m + shift + 0.01 * k, 0.1), f)
+    runs = [os.path.join(tmp, "var", "seed%d" % k) for k in (1, 2, 3)]
+    base = [os.path.join(tmp, "base", "seed%d" % k) for k in (1, 2, 3)]
+    out = os.path.join(tmp, "d.json")
+    script = os.path.join(ROOT, "bench", "post", "ensemble.py")
+    p = subprocess.run([sys.executable, script] + runs + ["--against"] + base + ["--json", out],
+                       capture_output=True, text=True)
+    ensure(p.returncode == 0, p.stderr)
+    d = json.load(open(out))["difference"]["T_P_per_W"]
+    ensure(abs(d["difference"] - 0.5) < 1e-12 and d["resolved"] and d["half_width"] < 1e-9, d)
+    ensure("resolved" in p.stdout, p.stdout)
+    p = subprocess.run([sys.executable, script] + runs + ["--against"] + base[::-1], capture_output=True, text=True)
+    ensure(p.returncode == 2 and "not the same bed" in p.stderr, p.stderr)
+
+
 def launcher_refuses_bad_seeds():
     env = dict(os.environ, DEMFEM_NO_BUILD="1")
     scene = os.path.join(ROOT, "tests", "coupling", "scenes", "tire_small.cfg")
@@ -105,7 +152,7 @@ def launcher_refuses_bad_seeds():
 
 
 CASES = {f.__name__: f for f in (coverage_known_mean, dominant_named, seeds_for_target, reads_summaries_from_runs,
-                                 launcher_refuses_bad_seeds)}
+                                 paired_difference, launcher_refuses_bad_seeds)}
 
 if __name__ == "__main__":
     CASES[sys.argv[1]]()

@@ -82,32 +82,34 @@ def fit(rows):
                                                       for e, r in zip(resid, good))}
 
 
+def step_row(m, p, grains, ncols, latency, bandwidth):
+    """The model's time per step on p ranks: {ranks, owned, ghosts, compute_s, halo_shm_s, halo_net_s,
+    migrate_s, step_s} (inner ranks: two columns of ghosts, one for two ranks, none alone)."""
+    owned = grains / p
+    ghosts = 0.0 if p == 1 else (2.0 if p > 2 else 1.0) * grains / ncols
+    compute = m["alpha"] * owned + m["beta"] * ghosts
+    halo_shm = 0.0 if p == 1 else m["gamma"] * ghosts
+    halo_net = 0.0 if p == 1 else 2 * (latency + ghosts / 2 * GHOST_BYTES / bandwidth) + \
+        math.ceil(math.log2(p)) * latency
+    migrate = m["alpha_m"] * owned
+    return {"ranks": p, "owned": owned, "ghosts": ghosts, "compute_s": compute, "halo_shm_s": halo_shm,
+            "halo_net_s": halo_net, "migrate_s": migrate, "step_s": compute + halo_net + migrate}
+
+
 def project(m, grains, length, cell, steps, ranks, latency, bandwidth):
-    """Rows {ranks, owned, ghosts, compute, halo_shm, halo_net, migrate, step_s, wall_h, speedup, efficiency}
-    or {ranks, refused} where slabs would be thinner than a column."""
+    """Rows of step_row with wall_h, speedup and efficiency (against one rank), or {ranks, refused} where
+    slabs would be thinner than a column."""
     ncols = int(length / cell)
+    serial = step_row(m, 1, grains, ncols, latency, bandwidth)["step_s"]
     out = []
     for p in ranks:
         if p > ncols:
             out.append({"ranks": p, "refused": "more ranks than the %d cell columns along x" % ncols})
             continue
-        owned = grains / p
-        ghosts = 0.0 if p == 1 else (2.0 if p > 2 else 1.0) * grains / ncols
-        compute = m["alpha"] * owned + m["beta"] * ghosts
-        halo_shm = 0.0 if p == 1 else m["gamma"] * ghosts
-        halo_net = 0.0 if p == 1 else 2 * (latency + ghosts / 2 * GHOST_BYTES / bandwidth) + \
-            math.ceil(math.log2(p)) * latency
-        migrate = m["alpha_m"] * owned
-        step = compute + halo_net + migrate
-        row = {"ranks": p, "owned": owned, "ghosts": ghosts, "compute_s": compute, "halo_shm_s": halo_shm,
-               "halo_net_s": halo_net, "migrate_s": migrate, "step_s": step, "wall_h": step * steps / 3600}
+        row = step_row(m, p, grains, ncols, latency, bandwidth)
+        row.update(wall_h=row["step_s"] * steps / 3600, speedup=serial / row["step_s"])
+        row["efficiency"] = row["speedup"] / p
         out.append(row)
-    base = next((r for r in out if r["ranks"] == 1), None)
-    serial = base["step_s"] if base else m["alpha"] * grains + m["alpha_m"] * grains
-    for r in out:
-        if "step_s" in r:
-            r["speedup"] = serial / r["step_s"]
-            r["efficiency"] = r["speedup"] / r["ranks"]
     return ncols, out
 
 

@@ -158,6 +158,61 @@ void dem_hist_orient(dem_world *w)
         w->hist_ori[w->hist_cur][p] = tag[w->pi[p]] < tag[w->pj[p]];
 }
 
+/* The candidate pairs of rows [i0, i1): each grain's neighbours in the 27
+ * cells around it, within r_i + r_j + skin, later in the grain order (a
+ * left ghost pairs with owned grains only), partners in a fixed cell order.
+ * Into tb->rows, grown as needed; returns the count, -1 when out of memory;
+ * *n_cross counts the pairs with a ghost. */
+static long search_rows(const dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb,
+                        long *n_cross)
+{
+    const dem_grains *g = &w->g;
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    long n = 0;
+    for (int i = i0; i < i1; i++) {
+        const int jmin = i < own_lo ? own_lo - 1 : i;
+        int c = w->grain_cell[i];
+        int cz = c % gd->n[2], cy = (c / gd->n[2]) % gd->n[1], cx = c / (gd->n[2] * gd->n[1]);
+        double ri = g->r[i] + w->skin;
+        for (int dx = -1; dx <= 1; dx++) {
+            int x = cx + dx;
+            if (x < 0 || x >= gd->n[0])
+                continue;
+            for (int dy = -1; dy <= 1; dy++) {
+                int y = cy + dy;
+                if (y < 0 || y >= gd->n[1])
+                    continue;
+                for (int dz = -1; dz <= 1; dz++) {
+                    int z = cz + dz;
+                    if (z < 0 || z >= gd->n[2])
+                        continue;
+                    int cc = (x * gd->n[1] + y) * gd->n[2] + z;
+                    for (int k = w->cell_start[cc]; k < w->cell_start[cc + 1]; k++) {
+                        int j = w->cell_items[k];
+                        if (j <= jmin)
+                            continue;
+                        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
+                        double cut = ri + g->r[j];
+                        if (ex * ex + ey * ey + ez * ez >= cut * cut)
+                            continue;
+                        if (n == tb->rows_cap) { /* grows at rebuilds only, rarely after the first */
+                            long cap = tb->rows_cap ? 2 * tb->rows_cap : 4096;
+                            int *b = realloc(tb->rows, (size_t)cap * 2 * sizeof *b);
+                            if (!b)
+                                return -1;
+                            tb->rows = b, tb->rows_cap = cap;
+                        }
+                        tb->rows[2 * n] = i, tb->rows[2 * n + 1] = j;
+                        n++;
+                        *n_cross += i < own_lo || j >= own_hi;
+                    }
+                }
+            }
+        }
+    }
+    return n;
+}
+
 int dem_neighbour_rebuild(dem_world *w, cm_error *err)
 {
     dem_grains *g = &w->g;
@@ -179,46 +234,34 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
      * rows in the global grain order, partners in a fixed cell order. */
     if (!w->dist)
         w->own_lo = 0, w->own_hi = g->n;
-    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    const int own_hi = w->own_hi;
+    /* each thread walks a contiguous range of rows into its own buffer; the
+     * buffers joined in thread order are the one-thread list (a small world
+     * is searched by one thread) */
+    const int t_n = own_hi >= 4096 ? w->n_threads : 1;
     long n_cross = 0;
+    int nomem = 0;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(t_n) if (t_n > 1) reduction(+ : n_cross) reduction(| : nomem)
+#endif
+    {
+        const int t = dem_thread_id();
+        dem_thread_buf *tb = &w->tb[t];
+        long n = search_rows(w, &gd, (int)((long)own_hi * t / t_n), (int)((long)own_hi * (t + 1) / t_n), tb,
+                             &n_cross);
+        nomem |= n < 0;
+        tb->rows_n = n < 0 ? 0 : n;
+    }
+    long total = 0;
+    for (int t = 0; t < t_n; t++)
+        total += w->tb[t].rows_n;
+    if (nomem || total > INT_MAX || dem_pairs_reserve(w, (int)total))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld pairs", w->step, total);
     w->n_pairs = 0;
-    for (int i = 0; i < own_hi; i++) {
-        const int jmin = i < own_lo ? own_lo - 1 : i;
-        int c = w->grain_cell[i];
-        int cz = c % gd.n[2], cy = (c / gd.n[2]) % gd.n[1], cx = c / (gd.n[2] * gd.n[1]);
-        double ri = g->r[i] + w->skin;
-        for (int dx = -1; dx <= 1; dx++) {
-            int x = cx + dx;
-            if (x < 0 || x >= gd.n[0])
-                continue;
-            for (int dy = -1; dy <= 1; dy++) {
-                int y = cy + dy;
-                if (y < 0 || y >= gd.n[1])
-                    continue;
-                for (int dz = -1; dz <= 1; dz++) {
-                    int z = cz + dz;
-                    if (z < 0 || z >= gd.n[2])
-                        continue;
-                    int cc = (x * gd.n[1] + y) * gd.n[2] + z;
-                    for (int k = w->cell_start[cc]; k < w->cell_start[cc + 1]; k++) {
-                        int j = w->cell_items[k];
-                        if (j <= jmin)
-                            continue;
-                        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
-                        double cut = ri + g->r[j];
-                        if (ex * ex + ey * ey + ez * ez >= cut * cut)
-                            continue;
-                        if (w->n_pairs == w->pair_cap && dem_pairs_reserve(w, w->n_pairs + 1))
-                            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step,
-                                           w->n_pairs + 1);
-                        w->pi[w->n_pairs] = i;
-                        w->pj[w->n_pairs] = j;
-                        w->n_pairs++;
-                        n_cross += i < own_lo || j >= own_hi;
-                    }
-                }
-            }
-        }
+    for (int t = 0; t < t_n; t++) {
+        const int *b = w->tb[t].rows;
+        for (long k = 0; k < w->tb[t].rows_n; k++, w->n_pairs++)
+            w->pi[w->n_pairs] = b[2 * k], w->pj[w->n_pairs] = b[2 * k + 1];
     }
     /* frozen-frozen pairs to the end of the list: the narrow phase stops at
      * n_active_pairs, their springs stay in the history untouched */
@@ -251,10 +294,16 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     const unsigned char *oori = w->hist_ori[w->hist_cur];
     unsigned char *nori = w->hist_ori[1 - w->hist_cur];
     const int hs = w->hist_stride;
-    for (int p = 0; p < w->n_pairs; p++) {
+    for (int p = 0; p < w->n_pairs; p++) /* tags survive removals */
+        nw->row[dem_hash_insert(nw, dem_pair_key(g->tag[w->pi[p]], g->tag[w->pj[p]]))] = p;
+    /* the springs: lookups only, any order */
+    const int np = w->n_pairs;
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(t_n) if (t_n > 1) schedule(static)
+#endif
+    for (int p = 0; p < np; p++) {
         const int ti = g->tag[w->pi[p]], tj = g->tag[w->pj[p]];
-        uint64_t key = dem_pair_key(ti, tj); /* tags survive removals */
-        nw->row[dem_hash_insert(nw, key)] = p;
+        uint64_t key = dem_pair_key(ti, tj);
         int o = dem_hash_find(old, key), flip = 0;
         double *xi = nval + (size_t)hs * p;
         if (o >= 0) {
@@ -278,6 +327,9 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     memcpy(g->z0, g->z, (size_t)g->n * sizeof(double));
     /* walls a grain can reach before the next rebuild: it moves at most
      * skin/2 until then, so a wall farther than r + skin stays out of reach */
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(t_n) if (t_n > 1) schedule(static)
+#endif
     for (int i = 0; i < g->n; i++) {
         uint32_t near = 0;
         for (int k = 0; k < w->n_walls; k++) {

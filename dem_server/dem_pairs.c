@@ -445,27 +445,16 @@ static inline __attribute__((always_inline)) void batch_scatter_body(const pair_
                                                                       const pair_batch *b, const int spring)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
-    const int n = b->n;
-    /* The pairs of one grain i come in a run (rows in grain order): its six
-     * sums are held in registers over the run and stored once. The same
-     * additions in the same order as one pair at a time, since no pair's j
-     * is its own i. */
-    for (int k = 0; k < n;) {
-        const int i = b->i[k];
-        double fx = s->fx[i], fy = s->fy[i], fz = s->fz[i], tx = s->tx[i], ty = s->ty[i], tz = s->tz[i];
-        do {
-            int p = b->p[k], j = b->j[k];
-            double *xi = a->hist + (size_t)hs * p;
-            xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
-            if (spring)
-                xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
-            double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
-                                    b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
-            fx += f[0], fy += f[1], fz += f[2], tx += f[3], ty += f[4], tz += f[5];
-            add_j(s, j, f);
-            k++;
-        } while (k < n && b->i[k] == i);
-        s->fx[i] = fx, s->fy[i] = fy, s->fz[i] = fz, s->tx[i] = tx, s->ty[i] = ty, s->tz[i] = tz;
+    for (int k = 0; k < b->n; k++) {
+        int p = b->p[k], i = b->i[k], j = b->j[k];
+        double *xi = a->hist + (size_t)hs * p;
+        xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
+        if (spring)
+            xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
+        double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
+                                b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
+        add_i(s, i, f);
+        add_j(s, j, f);
     }
 }
 

@@ -84,6 +84,10 @@ typedef struct ipc_mpi_hooks {
 
 void ipc_mpi_register(const ipc_mpi_hooks *hooks);
 
+/* Tests only (tests/ipc/ipc_rogue.c, a broken or hostile peer): sends n
+ * bytes as this side's next frame message exactly as given, unchecked. */
+int ipc_mpi_send_raw(ipc_channel *ch, const void *bytes, int n);
+
 /* ipc.c's helpers, for ipc_mpi.c. */
 int ipc_channel_set_err(ipc_channel *ch, int code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 int ipc_channel_check_peer(ipc_channel *ch, const char *waiting_for);

@@ -12,7 +12,7 @@
  * A slot is free again when its send completed (the ring's sem_empty); a
  * frame's receive is posted in advance into its slot (sem_full). Every wait
  * tests its request, spins for the channel's adaptive budget, then naps
- * (1 us doubling to 0.5 ms) with the stop flag and the peer's state checked
+ * (1 us doubling to 0.1 ms) with the stop flag and the peer's state checked
  * between naps. PROTOCOL.md, "The MPI transport". */
 #include "ipc_mpi.h"
 
@@ -27,7 +27,7 @@
 
 enum { TAG_SURFACE = 1, TAG_HELLO = 2, TAG_STATE = 3, TAG_FRAME = 4, TAG_LINK = 0x1e17 };
 enum { STATE_SENDS = 4 };           /* state messages in flight at most (answer, failure, end) */
-#define NAP_MAX_NS 500000L          /* longest nap of a wait: 0.5 ms */
+#define NAP_MAX_NS 100000L          /* longest nap of a wait: 0.1 ms (a large frame's fragments wait for naps on both sides) */
 #define CLOSE_WAIT_S 5.0            /* how long a normal close waits for its last sends */
 
 typedef struct state_msg {
@@ -457,6 +457,14 @@ static int link_close(ipc_channel *ch)
     ch->mpi = NULL;
     g_open = 0;
     return keep;
+}
+
+int ipc_mpi_send_raw(ipc_channel *ch, const void *bytes, int n)
+{
+    if (!ch->mpi)
+        return ipc_channel_set_err(ch, IPC_ERR_ARG, "not a channel of the MPI transport");
+    int mrc = MPI_Send(bytes, n, MPI_BYTE, 0, TAG_FRAME, ch->mpi->comm);
+    return mrc == MPI_SUCCESS ? IPC_OK : mpi_fail(ch, mrc, "sending raw bytes");
 }
 
 static const ipc_mpi_hooks k_hooks = {

@@ -706,7 +706,7 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
+    fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME|mpi | --standalone) [--out DIR] [--threads N]\n"
                     "                  [--resume DIR] [--set KEY=VALUE]... [--print-config[=json]]\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");

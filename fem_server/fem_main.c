@@ -434,7 +434,7 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
+    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME|mpi [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
                     "       fem_server --scene FILE [--set KEY=VALUE]... --print-config[=json]\n"
                     "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"

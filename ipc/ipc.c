@@ -46,8 +46,8 @@ static inline void cpu_relax(void)
 
 static uint64_t align_up(uint64_t x, uint64_t a) { return (x + a - 1) / a * a; }
 
-static int set_err(ipc_channel *ch, int code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static int set_err(ipc_channel *ch, int code, const char *fmt, ...)
+/* The channel's error message; returns code (channel.h: ipc_mpi.c's too). */
+int ipc_channel_set_err(ipc_channel *ch, int code, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -55,6 +55,7 @@ static int set_err(ipc_channel *ch, int code, const char *fmt, ...)
     va_end(ap);
     return code;
 }
+#define set_err ipc_channel_set_err
 
 const char *ipc_role_name(ipc_role role)
 {
@@ -255,15 +256,6 @@ static int check_peer(ipc_channel *ch, const char *waiting_for)
 int ipc_channel_check_peer(ipc_channel *ch, const char *waiting_for) { return check_peer(ch, waiting_for); }
 
 double ipc_channel_now_s(void) { return now_s(); }
-
-int ipc_channel_set_err(ipc_channel *ch, int code, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(ch->err, sizeof ch->err, fmt, ap);
-    va_end(ap);
-    return code;
-}
 
 /* Shortest spin budget: a peer that answers fast is still noticed (and the
  * budget grows back) at the cost of a microsecond per wait. */

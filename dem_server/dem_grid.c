@@ -158,6 +158,122 @@ void dem_hist_orient(dem_world *w)
         w->hist_ori[w->hist_cur][p] = tag[w->pi[p]] < tag[w->pj[p]];
 }
 
+/* What carry_spring reads and writes, taken out of the world once (its
+ * stores could otherwise alias every field it reads). */
+typedef struct spring_carry {
+    const int *tag, *pi, *pj;
+    int hs;
+    const dem_hash *old, *extra;
+    const double *oval, *extra_val;
+    const unsigned char *oori;
+    double *nval;
+    unsigned char *nori;
+} spring_carry;
+
+static spring_carry spring_carry_of(const dem_world *w)
+{
+    const int c = w->hist_cur;
+    return (spring_carry){w->g.tag,      w->pi,          w->pj,           w->hist_stride,   &w->hist[c],
+                          w->hist_extra, w->hist_val[c], w->hist_extra_val, w->hist_ori[c], w->hist_val[1 - c],
+                          w->hist_ori[1 - c]};
+}
+
+/* Pair p of the new list (its key already in the other table): its spring
+ * from the previous list (by tags, which survive removals and re-sorts) or
+ * from the springs received with migrated grains, else zero; sign flipped
+ * where the pair's grains come in the other order. */
+static inline void carry_spring(const spring_carry *c, int p)
+{
+    const int hs = c->hs, ti = c->tag[c->pi[p]], tj = c->tag[c->pj[p]];
+    uint64_t key = dem_pair_key(ti, tj);
+    int o = dem_hash_find(c->old, key), flip = 0;
+    double *xi = c->nval + (size_t)hs * p;
+    if (o >= 0) {
+        int r = c->old->row[o];
+        memcpy(xi, c->oval + (size_t)hs * r, (size_t)hs * sizeof(double));
+        flip = c->oori[r] != (ti < tj); /* a re-sort swapped i and j */
+    } else if (c->extra && (o = dem_hash_find(c->extra, key)) >= 0) {
+        memcpy(xi, c->extra_val + (size_t)hs * c->extra->row[o], (size_t)hs * sizeof(double));
+        flip = ti > tj; /* received lower tag first */
+    } else {
+        memset(xi, 0, (size_t)hs * sizeof(double));
+    }
+    if (flip)
+        for (int k = 0; k < hs; k++)
+            xi[k] = -xi[k];
+    c->nori[p] = ti < tj;
+}
+
+/* The candidate pairs of rows [i0, i1): each grain's neighbours in the 27
+ * cells around it, within r_i + r_j + skin, later in the grain order (a
+ * left ghost pairs with owned grains only), partners in a fixed cell order.
+ * The first rows' thread (to_list) writes them into the pair list itself,
+ * the others into tb->rows; both grow as needed. Returns the count, -1 when
+ * out of memory; *n_cross counts the pairs with a ghost. */
+static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb, int to_list,
+                        long *n_cross)
+{
+    const dem_grains *g = &w->g;
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    const double *x = g->x, *y = g->y, *z = g->z, *r = g->r;
+    const int *cell_start = w->cell_start, *cell_items = w->cell_items;
+    const double skin = w->skin;
+    int *pi = w->pi, *pj = w->pj;
+    long cap = to_list ? w->pair_cap : tb->rows_cap, n = 0;
+    int *rows = tb->rows;
+    for (int i = i0; i < i1; i++) {
+        const int jmin = i < own_lo ? own_lo - 1 : i;
+        int c = w->grain_cell[i];
+        int cz = c % gd->n[2], cy = (c / gd->n[2]) % gd->n[1], cx = c / (gd->n[2] * gd->n[1]);
+        double ri = r[i] + skin;
+        for (int dx = -1; dx <= 1; dx++) {
+            int ix = cx + dx;
+            if (ix < 0 || ix >= gd->n[0])
+                continue;
+            for (int dy = -1; dy <= 1; dy++) {
+                int iy = cy + dy;
+                if (iy < 0 || iy >= gd->n[1])
+                    continue;
+                for (int dz = -1; dz <= 1; dz++) {
+                    int iz = cz + dz;
+                    if (iz < 0 || iz >= gd->n[2])
+                        continue;
+                    int cc = (ix * gd->n[1] + iy) * gd->n[2] + iz;
+                    for (int k = cell_start[cc]; k < cell_start[cc + 1]; k++) {
+                        int j = cell_items[k];
+                        if (j <= jmin)
+                            continue;
+                        double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
+                        double cut = ri + r[j];
+                        if (ex * ex + ey * ey + ez * ez >= cut * cut)
+                            continue;
+                        if (n == cap) { /* grows at rebuilds only, rarely after the first */
+                            if (to_list) {
+                                if (n >= INT_MAX || dem_pairs_reserve(w, (int)n + 1))
+                                    return -1;
+                                pi = w->pi, pj = w->pj, cap = w->pair_cap;
+                            } else {
+                                long c2 = cap ? 2 * cap : 4096;
+                                int *b = realloc(rows, (size_t)c2 * 2 * sizeof *b);
+                                if (!b)
+                                    return -1;
+                                rows = tb->rows = b, cap = tb->rows_cap = c2;
+                            }
+                        }
+                        if (to_list)
+                            pi[n] = i, pj[n] = j;
+                        else
+                            rows[2 * n] = i, rows[2 * n + 1] = j;
+                        n++;
+                        *n_cross += i < own_lo || j >= own_hi;
+                    }
+                }
+            }
+        }
+    }
+    return n;
+}
+
 int dem_neighbour_rebuild(dem_world *w, cm_error *err)
 {
     dem_grains *g = &w->g;
@@ -179,46 +295,34 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
      * rows in the global grain order, partners in a fixed cell order. */
     if (!w->dist)
         w->own_lo = 0, w->own_hi = g->n;
-    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    const int own_hi = w->own_hi;
+    /* each thread walks a contiguous range of rows, the first into the
+     * list, the others into their buffers, appended in thread order: the
+     * one-thread list (a small world is searched by one thread) */
+    const int t_n = own_hi >= 4096 ? w->n_threads : 1;
     long n_cross = 0;
-    w->n_pairs = 0;
-    for (int i = 0; i < own_hi; i++) {
-        const int jmin = i < own_lo ? own_lo - 1 : i;
-        int c = w->grain_cell[i];
-        int cz = c % gd.n[2], cy = (c / gd.n[2]) % gd.n[1], cx = c / (gd.n[2] * gd.n[1]);
-        double ri = g->r[i] + w->skin;
-        for (int dx = -1; dx <= 1; dx++) {
-            int x = cx + dx;
-            if (x < 0 || x >= gd.n[0])
-                continue;
-            for (int dy = -1; dy <= 1; dy++) {
-                int y = cy + dy;
-                if (y < 0 || y >= gd.n[1])
-                    continue;
-                for (int dz = -1; dz <= 1; dz++) {
-                    int z = cz + dz;
-                    if (z < 0 || z >= gd.n[2])
-                        continue;
-                    int cc = (x * gd.n[1] + y) * gd.n[2] + z;
-                    for (int k = w->cell_start[cc]; k < w->cell_start[cc + 1]; k++) {
-                        int j = w->cell_items[k];
-                        if (j <= jmin)
-                            continue;
-                        double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
-                        double cut = ri + g->r[j];
-                        if (ex * ex + ey * ey + ez * ez >= cut * cut)
-                            continue;
-                        if (w->n_pairs == w->pair_cap && dem_pairs_reserve(w, w->n_pairs + 1))
-                            return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d pairs", w->step,
-                                           w->n_pairs + 1);
-                        w->pi[w->n_pairs] = i;
-                        w->pj[w->n_pairs] = j;
-                        w->n_pairs++;
-                        n_cross += i < own_lo || j >= own_hi;
-                    }
-                }
-            }
-        }
+    int nomem = 0;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(t_n) if (t_n > 1) reduction(+ : n_cross) reduction(| : nomem)
+#endif
+    {
+        const int t = dem_thread_id();
+        dem_thread_buf *tb = &w->tb[t];
+        long n = search_rows(w, &gd, (int)((long)own_hi * t / t_n), (int)((long)own_hi * (t + 1) / t_n), tb, t == 0,
+                             &n_cross);
+        nomem |= n < 0;
+        tb->rows_n = n < 0 ? 0 : n;
+    }
+    long total = 0;
+    for (int t = 0; t < t_n; t++)
+        total += w->tb[t].rows_n;
+    if (nomem || total > INT_MAX || dem_pairs_reserve(w, (int)total))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %ld pairs", w->step, total);
+    w->n_pairs = (int)w->tb[0].rows_n;
+    for (int t = 1; t < t_n; t++) {
+        const int *b = w->tb[t].rows;
+        for (long k = 0; k < w->tb[t].rows_n; k++, w->n_pairs++)
+            w->pi[w->n_pairs] = b[2 * k], w->pj[w->n_pairs] = b[2 * k + 1];
     }
     /* frozen-frozen pairs to the end of the list: the narrow phase stops at
      * n_active_pairs, their springs stay in the history untouched */
@@ -243,34 +347,24 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     w->n_cross_pairs = n_cross;
     /* history: every candidate pair is entered in the other table, its
      * spring carried over from the previous list when the pair was known */
-    dem_hash *old = &w->hist[w->hist_cur], *nw = &w->hist[1 - w->hist_cur];
-    const double *oval = w->hist_val[w->hist_cur];
-    double *nval = w->hist_val[1 - w->hist_cur];
+    dem_hash *nw = &w->hist[1 - w->hist_cur];
     if (dem_hash_reset(nw, w->n_pairs))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
-    const unsigned char *oori = w->hist_ori[w->hist_cur];
-    unsigned char *nori = w->hist_ori[1 - w->hist_cur];
-    const int hs = w->hist_stride;
-    for (int p = 0; p < w->n_pairs; p++) {
-        const int ti = g->tag[w->pi[p]], tj = g->tag[w->pj[p]];
-        uint64_t key = dem_pair_key(ti, tj); /* tags survive removals */
-        nw->row[dem_hash_insert(nw, key)] = p;
-        int o = dem_hash_find(old, key), flip = 0;
-        double *xi = nval + (size_t)hs * p;
-        if (o >= 0) {
-            int r = old->row[o];
-            memcpy(xi, oval + (size_t)hs * r, (size_t)hs * sizeof(double));
-            flip = oori[r] != (ti < tj); /* a re-sort swapped i and j */
-        } else if (w->hist_extra && (o = dem_hash_find(w->hist_extra, key)) >= 0) {
-            memcpy(xi, w->hist_extra_val + (size_t)hs * w->hist_extra->row[o], (size_t)hs * sizeof(double));
-            flip = ti > tj; /* received lower tag first */
-        } else {
-            memset(xi, 0, (size_t)hs * sizeof(double));
+    const int np = w->n_pairs;
+    const spring_carry sc = spring_carry_of(w);
+    if (t_n == 1) {
+        for (int p = 0; p < np; p++) {
+            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+            carry_spring(&sc, p);
         }
-        if (flip)
-            for (int k = 0; k < hs; k++)
-                xi[k] = -xi[k];
-        nori[p] = ti < tj;
+    } else { /* the table in pair order, then the springs: lookups only, any order */
+        for (int p = 0; p < np; p++)
+            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(t_n) schedule(static)
+#endif
+        for (int p = 0; p < np; p++)
+            carry_spring(&sc, p);
     }
     w->hist_cur = 1 - w->hist_cur;
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));
@@ -278,6 +372,9 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     memcpy(g->z0, g->z, (size_t)g->n * sizeof(double));
     /* walls a grain can reach before the next rebuild: it moves at most
      * skin/2 until then, so a wall farther than r + skin stays out of reach */
+#ifdef _OPENMP
+#pragma omp parallel for num_threads(t_n) if (t_n > 1) schedule(static)
+#endif
     for (int i = 0; i < g->n; i++) {
         uint32_t near = 0;
         for (int k = 0; k < w->n_walls; k++) {

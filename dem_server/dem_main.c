@@ -39,6 +39,7 @@
 #include "timer.h"
 #ifdef DEMFEM_MPI
 #include "dem_mpi.h"
+#include "ipc_mpi.h"
 #endif
 
 /* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
@@ -75,23 +76,33 @@ static void ensure_passive_waiting(const options *o, int threads)
  * a plain dem_server behaves exactly as without MPI. With more than one rank
  * the DEM-only run (--standalone) is distributed (dem_mpi.h): rank 0 builds
  * or loads the bed and writes the outputs, the grains spread over the ranks
- * at the first neighbour rebuild. */
+ * at the first neighbour rebuild. g_comm holds dem_server's own ranks: in an
+ * MPMD job with fem_server (the channel "mpi", ipc_mpi.h) MPI_COMM_WORLD
+ * holds both programs. */
 static int g_rank = 0, g_ranks = 1;
+#ifdef DEMFEM_MPI
+static MPI_Comm g_comm = MPI_COMM_NULL;
+#endif
 
-static void mpi_start(void)
+static int mpi_start(cm_error *err)
 {
 #ifdef DEMFEM_MPI
-    if (!getenv("OMPI_COMM_WORLD_SIZE") && !getenv("PMIX_RANK") && !getenv("PMI_RANK")) /* no launcher */
-        return;
-    MPI_Init(NULL, NULL);
-    MPI_Comm_rank(MPI_COMM_WORLD, &g_rank);
-    MPI_Comm_size(MPI_COMM_WORLD, &g_ranks);
+    char msg[256];
+    if (ipc_mpi_start(&g_comm, msg, sizeof msg))
+        return cm_fail(err, CM_ERR_PEER, "starting MPI: %s", msg);
+    if (g_comm == MPI_COMM_NULL) /* no launcher */
+        return CM_OK;
+    MPI_Comm_rank(g_comm, &g_rank);
+    MPI_Comm_size(g_comm, &g_ranks);
     if (g_rank > 0) {
         char tag[16];
         snprintf(tag, sizeof tag, "dem:r%d", g_rank);
         cm_log_set_tag(tag);
     }
+#else
+    (void)err;
 #endif
+    return CM_OK;
 }
 
 /* A failing rank stops the others (they may wait in a collective). */
@@ -99,7 +110,7 @@ static void mpi_abort_others(int code)
 {
 #ifdef DEMFEM_MPI
     if (g_ranks > 1)
-        MPI_Abort(MPI_COMM_WORLD, code);
+        MPI_Abort(g_comm, code);
 #else
     (void)code;
 #endif
@@ -108,12 +119,7 @@ static void mpi_abort_others(int code)
 static void mpi_stop(void)
 {
 #ifdef DEMFEM_MPI
-    int on = 0, off = 0;
-    MPI_Initialized(&on);
-    if (on)
-        MPI_Finalized(&off);
-    if (on && !off)
-        MPI_Finalize();
+    ipc_mpi_stop();
 #endif
 }
 
@@ -219,7 +225,7 @@ static int after_exchange(dem_world *w, void *user, long exchange, cm_error *err
 static int coupled_bcast(void *buf, size_t bytes, void *user, cm_error *err)
 {
     (void)user;
-    return dem_mpi_bcast(MPI_COMM_WORLD, buf, bytes, err);
+    return dem_mpi_bcast(g_comm, buf, bytes, err);
 }
 
 static int coupled_attach(dem_world *w, void *user, cm_error *err)
@@ -228,11 +234,11 @@ static int coupled_attach(dem_world *w, void *user, cm_error *err)
      * rank must write (gather) the next frame at the same exchange */
     output_ctx *c = user;
     long last[2] = {c->last_frame, c->last_series};
-    int rc = MPI_Bcast(last, 2, MPI_LONG, 0, MPI_COMM_WORLD);
+    int rc = MPI_Bcast(last, 2, MPI_LONG, 0, g_comm);
     if (rc != MPI_SUCCESS)
         return cm_fail(err, CM_ERR_IO, "MPI broadcast of the output positions failed");
     c->last_frame = last[0], c->last_series = last[1];
-    return dem_mpi_attach(w, MPI_COMM_WORLD, err);
+    return dem_mpi_attach(w, g_comm, err);
 }
 
 static int coupled_hash(dem_world *w, uint64_t *hash, void *user, cm_error *err)
@@ -409,7 +415,7 @@ static void report_rank_profiles(const dem_profile *p, const dem_coupled_profile
         cm_log_warn("out of memory for the ranks' profiles");
 #ifdef DEMFEM_MPI
     if (g_ranks > 1)
-        MPI_Gather(mine, RANK_COLS, MPI_DOUBLE, all, RANK_COLS, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+        MPI_Gather(mine, RANK_COLS, MPI_DOUBLE, all, RANK_COLS, MPI_DOUBLE, 0, g_comm);
     else
 #endif
         if (all)
@@ -468,7 +474,8 @@ static int run(const options *o)
     if (o->threads > 0)
         cfg.world.threads = o->threads;
     ensure_passive_waiting(o, cfg.world.threads);
-    mpi_start(); /* after the re-execution above */
+    if ((rc = mpi_start(&err))) /* after the re-execution above */
+        goto fail;
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -570,12 +577,12 @@ static int run(const options *o)
         double last = cm_now();
 #ifdef DEMFEM_MPI
         if (g_ranks > 1) {
-            if ((rc = dem_mpi_attach(w, MPI_COMM_WORLD, &err)))
+            if ((rc = dem_mpi_attach(w, g_comm, &err)))
                 goto fail;
             octx.last_frame = octx.last_series = dem_world_steps(w); /* rank 0's clock, now every rank's */
             octx.distributed = 1;
             octx.frames = octx.out != NULL;
-            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, g_comm);
             if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
                 goto fail;
         }
@@ -612,7 +619,7 @@ static int run(const options *o)
             def.dist = &dist;
             octx.distributed = 1;
             octx.frames = octx.dir != NULL; /* resuming, rank 0 opens its output in the restore hook */
-            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, MPI_COMM_WORLD);
+            MPI_Bcast(&octx.frames, 1, MPI_INT, 0, g_comm);
             if (g_rank == 0 && octx.frames && (rc = dem_world_from_config(&cfg, &octx.view, &err)))
                 goto fail;
         }
@@ -672,9 +679,9 @@ static int run(const options *o)
     goto cleanup;
 fail:
     cm_log_error("%s", err.msg);
-    mpi_abort_others(1);
-    if (ch)
+    if (ch) /* first: over MPI the abort below ends fem_server too */
         ipc_fail(ch, "dem_server: %s", err.msg);
+    mpi_abort_others(1);
     exit_code = 1;
 cleanup:
     ipc_close(&ch, exit_code == 0 ? IPC_OK : IPC_ERR_PEER_FAILED);
@@ -699,7 +706,7 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME | --standalone) [--out DIR] [--threads N]\n"
+    fprintf(stderr, "usage: dem_server --scene FILE (--shm /NAME|mpi | --standalone) [--out DIR] [--threads N]\n"
                     "                  [--resume DIR] [--set KEY=VALUE]... [--print-config[=json]]\n"
                     "  The granular side of the co-simulation; run both servers with ./run SCENE.\n"
                     "  --set overrides a scene setting, e.g. --set coupling.dt=2e-5 (repeatable).\n");

@@ -175,6 +175,66 @@ int dem_step_surface(dem_world *w, cm_error *err)
     return rc;
 }
 
+/* One grain's orientation: q <- (q + dt/2 (0, ω) q) / |...|, kept if the
+ * grain is frozen. */
+static inline __attribute__((always_inline)) void quat_step(double *q, double wx, double wy, double wz,
+                                                            unsigned char frozen, double dt)
+{
+    double hx = 0.5 * dt * wx, hy = 0.5 * dt * wy, hz = 0.5 * dt * wz;
+    double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
+    double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
+    double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
+    double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
+    double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
+    const int move = !frozen;
+    qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
+    q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
+}
+
+typedef double v4d __attribute__((vector_size(32)));
+typedef long long v4l __attribute__((vector_size(32)));
+
+/* a where mask's lanes are all ones, else b (bits, not arithmetic; a
+ * macro: a function taking vectors would change the ABI without AVX) */
+#define PICK(mask, a, b) ((v4d)(((v4l)(a) & (mask)) | ((v4l)(b) & ~(mask))))
+
+/* quat_step for four grains: their rows q[0..15] transposed into one vector
+ * per component, quat_step's expression on the vectors (each lane rounds
+ * as the scalar code does; -ffp-contract=off keeps products and sums
+ * apart), transposed back. */
+static inline __attribute__((always_inline)) void quat_step4(double *q, const double *wx, const double *wy,
+                                                             const double *wz, const unsigned char *frozen,
+                                                             double dt)
+{
+    v4d r0, r1, r2, r3;
+    memcpy(&r0, q, sizeof r0), memcpy(&r1, q + 4, sizeof r1), memcpy(&r2, q + 8, sizeof r2),
+        memcpy(&r3, q + 12, sizeof r3);
+    v4d t0 = __builtin_shuffle(r0, r1, (v4l){0, 4, 2, 6}), t1 = __builtin_shuffle(r0, r1, (v4l){1, 5, 3, 7});
+    v4d t2 = __builtin_shuffle(r2, r3, (v4l){0, 4, 2, 6}), t3 = __builtin_shuffle(r2, r3, (v4l){1, 5, 3, 7});
+    v4d cw = __builtin_shuffle(t0, t2, (v4l){0, 1, 4, 5}), cy = __builtin_shuffle(t0, t2, (v4l){2, 3, 6, 7});
+    v4d cx = __builtin_shuffle(t1, t3, (v4l){0, 1, 4, 5}), cz = __builtin_shuffle(t1, t3, (v4l){2, 3, 6, 7});
+    v4d vwx, vwy, vwz;
+    memcpy(&vwx, wx, sizeof vwx), memcpy(&vwy, wy, sizeof vwy), memcpy(&vwz, wz, sizeof vwz);
+    const double h = 0.5 * dt;
+    v4d hx = h * vwx, hy = h * vwy, hz = h * vwz;
+    v4d qw = cw - hx * cx - hy * cy - hz * cz;
+    v4d qx = cx + hx * cw + hy * cz - hz * cy;
+    v4d qy = cy - hx * cz + hy * cw + hz * cx;
+    v4d qz = cz + hx * cy - hy * cx + hz * cw;
+    v4d s2 = qw * qw + qx * qx + qy * qy + qz * qz, qn;
+    for (int l = 0; l < 4; l++)
+        qn[l] = 1.0 / sqrt(s2[l]);
+    v4l move = {!frozen[0], !frozen[1], !frozen[2], !frozen[3]};
+    move = -move; /* all bits set where the grain moves */
+    qw = PICK(move, qw * qn, cw), qx = PICK(move, qx * qn, cx), qy = PICK(move, qy * qn, cy), qz = PICK(move, qz * qn, cz);
+    t0 = __builtin_shuffle(qw, qx, (v4l){0, 4, 2, 6}), t1 = __builtin_shuffle(qw, qx, (v4l){1, 5, 3, 7});
+    t2 = __builtin_shuffle(qy, qz, (v4l){0, 4, 2, 6}), t3 = __builtin_shuffle(qy, qz, (v4l){1, 5, 3, 7});
+    r0 = __builtin_shuffle(t0, t2, (v4l){0, 1, 4, 5}), r2 = __builtin_shuffle(t0, t2, (v4l){2, 3, 6, 7});
+    r1 = __builtin_shuffle(t1, t3, (v4l){0, 1, 4, 5}), r3 = __builtin_shuffle(t1, t3, (v4l){2, 3, 6, 7});
+    memcpy(q, &r0, sizeof r0), memcpy(q + 4, &r1, sizeof r1), memcpy(q + 8, &r2, sizeof r2),
+        memcpy(q + 12, &r3, sizeof r3);
+}
+
 /* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
  * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
  * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
@@ -218,21 +278,14 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
     }
     /* q <- q + dt/2 (0, ω) q with the new ω, renormalised: first order in
      * ω dt per step, the orientation does not feed back into the forces of
-     * spheres. A loop of its own: the four components of a grain's q lie
-     * together, which the loop above (one grain per lane) could only gather
-     * and scatter. */
-    for (int i = lo; i < hi; i++) {
-        double *q = qa + 4 * (size_t)i;
-        double hx = 0.5 * dt * wx[i], hy = 0.5 * dt * wy[i], hz = 0.5 * dt * wz[i];
-        double qw = q[0] - hx * q[1] - hy * q[2] - hz * q[3];
-        double qx = q[1] + hx * q[0] + hy * q[3] - hz * q[2];
-        double qy = q[2] - hx * q[3] + hy * q[0] + hz * q[1];
-        double qz = q[3] + hx * q[2] - hy * q[1] + hz * q[0];
-        double qn = 1.0 / sqrt(qw * qw + qx * qx + qy * qy + qz * qz);
-        const int move = !frozen[i];
-        qw = move ? qw * qn : q[0], qx = move ? qx * qn : q[1], qy = move ? qy * qn : q[2], qz = move ? qz * qn : q[3];
-        q[0] = qw, q[1] = qx, q[2] = qy, q[3] = qz;
-    }
+     * spheres. A loop of its own: a grain's four components lie together,
+     * so four grains at a time are transposed into one vector per component
+     * (quat_step4), the same operations in each lane as quat_step on one. */
+    int k = lo;
+    for (; k + 4 <= hi; k += 4)
+        quat_step4(qa + 4 * (size_t)k, wx + k, wy + k, wz + k, frozen + k, dt);
+    for (; k < hi; k++)
+        quat_step(qa + 4 * (size_t)k, wx[k], wy[k], wz[k], frozen[k], dt);
     *maxd2_out = maxd2;
     if (!nonfinite)
         return INT_MAX;

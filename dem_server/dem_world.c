@@ -204,8 +204,8 @@ void dem_world_destroy(dem_world **wp)
     dem_hash_free(&w->hist[0]);
     dem_hash_free(&w->hist[1]);
     if (w->tb)
-        for (int t = 1; t < w->n_threads; t++)
-            free(w->tb[t].f);
+        for (int t = 0; t < w->n_threads; t++)
+            free(w->tb[t].f), free(w->tb[t].rows);
     free(w->tb);
     free(w->scratch);
     free(w->cell_pos);

@@ -109,6 +109,9 @@ typedef struct dem_thread_buf {
     double wall_f[DEM_MAX_WALLS][3];
     int contacts;
     int wall_rec_n;    /* distributed: wall contacts this thread recorded in dem_world.wall_rec */
+    int *rows;         /* the neighbour search's pairs of this thread's rows, (i, j) interleaved */
+    long rows_cap;     /* pairs rows can hold (grows at rebuilds, never shrinks) */
+    long rows_n;       /* pairs in rows after the search */
     double pad[8];     /* keeps two threads' wall_f apart by a cache line (no false sharing) */
 } dem_thread_buf;
 

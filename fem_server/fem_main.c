@@ -1,6 +1,7 @@
 /* fem_server: the tire side of the co-simulation.
  *
  *   fem_server --scene FILE --shm NAME [--out DIR]
+ *   mpirun -np N dem_server ... --shm mpi : -np 1 fem_server ... --shm mpi   the same over MPI
  *   fem_server --scene FILE --export-mesh FILE.msh   the scene's mesh as Gmsh .msh, then exit
  *   fem_server --scene FILE --print-config[=json]    the resolved scene (file + --set), then exit
  *   fem_server --scene FILE --fem-only [--out DIR]   the tire model alone (fem.supports, fem.loads)
@@ -40,6 +41,9 @@
 #include "signals.h"
 #include "fem_summary.h" /* [traction] */
 #include "timer.h"
+#ifdef DEMFEM_MPI
+#include "ipc_mpi.h"
+#endif
 
 /* SIGINT/SIGTERM: common/signals.h (checkpoint the next exchange and stop,
  * or stop at once before the exchange loop or 10 s later). */
@@ -430,7 +434,7 @@ cleanup:
 
 static int usage(void)
 {
-    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
+    fprintf(stderr, "usage: fem_server --scene FILE --shm /NAME|mpi [--out DIR] [--resume DIR] [--set KEY=VALUE]...\n"
                     "       fem_server --scene FILE --export-mesh FILE.msh\n"
                     "       fem_server --scene FILE [--set KEY=VALUE]... --print-config[=json]\n"
                     "       fem_server --scene FILE --fem-only [--out DIR] [--set KEY=VALUE]...\n"
@@ -489,9 +493,23 @@ int main(int argc, char **argv)
     cm_log_set_tag("fem");
     cm_h5_library_init();
     g_sig = cm_signals_install();
-    if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST) {
-        cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
+#ifdef DEMFEM_MPI
+    /* Only when mpirun started us (as the second program of an MPMD job with
+     * dem_server: the channel "mpi"); a plain fem_server runs without MPI. */
+    MPI_Comm own;
+    char mpi_err[256];
+    if (ipc_mpi_start(&own, mpi_err, sizeof mpi_err)) {
+        cm_log_error("starting MPI: %s", mpi_err);
         return 1;
     }
-    return run(&o);
+#endif
+    int rc = 1;
+    if (!o.export_mesh && mkdir(o.out, 0755) != 0 && errno != EEXIST)
+        cm_log_error("cannot create output folder %s: %s", o.out, strerror(errno));
+    else
+        rc = run(&o);
+#ifdef DEMFEM_MPI
+    ipc_mpi_stop();
+#endif
+    return rc;
 }

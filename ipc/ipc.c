@@ -16,36 +16,15 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "channel.h"
 #include "segment.h"
 
-struct ipc_channel {
-    ipc_role role, peer;
-    char name[256];
-    ipc_segment_header *hdr;
-    unsigned char *base; /* == (unsigned char *)hdr */
-    size_t size;
-    int linked;          /* the name still exists and we created it */
-    /* Trusted copies of what the header said when we checked it. */
-    uint32_t n_nodes, n_tris, slots, flags;
-    ipc_layout lay;
-    double dem_dt;
-    uint32_t exchange_every;
-    /* Sequence numbers: next frame to send and to receive. */
-    uint64_t send_seq, recv_seq;
-    int send_open, recv_open; /* a begin/recv without its commit/release */
-    /* Waiting policy. */
-    double stall_timeout, connect_timeout, spin_s;
-    /* adaptive spin budgets (s, 0 < budget <= spin_s): [0] the peer's
-     * frames, [1] free slots and the handshake (wait_sem) */
-    double spin_budget[2];
-    volatile sig_atomic_t *stop_flag;
-    /* Heartbeat thread. */
-    pthread_t heartbeat;
-    int heartbeat_running;
-    _Atomic int heartbeat_stop;
-    ipc_stats stats;
-    char err[512];
-};
+/* The MPI transport's hooks (ipc_mpi.c), registered by ipc_mpi_start(); NULL
+ * when it is not built or not started. */
+static const ipc_mpi_hooks *g_mpi;
+
+void ipc_mpi_register(const ipc_mpi_hooks *hooks) { g_mpi = hooks; }
+
 
 /* ---- small helpers -------------------------------------------------------- */
 
@@ -67,8 +46,8 @@ static inline void cpu_relax(void)
 
 static uint64_t align_up(uint64_t x, uint64_t a) { return (x + a - 1) / a * a; }
 
-static int set_err(ipc_channel *ch, int code, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-static int set_err(ipc_channel *ch, int code, const char *fmt, ...)
+/* The channel's error message; returns code (channel.h: ipc_mpi.c's too). */
+int ipc_channel_set_err(ipc_channel *ch, int code, const char *fmt, ...)
 {
     va_list ap;
     va_start(ap, fmt);
@@ -76,6 +55,7 @@ static int set_err(ipc_channel *ch, int code, const char *fmt, ...)
     va_end(ap);
     return code;
 }
+#define set_err ipc_channel_set_err
 
 const char *ipc_role_name(ipc_role role)
 {
@@ -217,6 +197,8 @@ static void record_failure(ipc_channel *ch, const char *reason)
         ch->hdr->fail_reason[n] = '\0';
     }
     atomic_store(&ch->hdr->state, IPC_STATE_FAILED);
+    if (ch->mpi) /* the peer holds its own copy of the header: tell it */
+        g_mpi->send_state(ch);
 }
 
 /* A process that has exited but is not yet reaped by its parent (a zombie)
@@ -270,6 +252,10 @@ static int check_peer(ipc_channel *ch, const char *waiting_for)
     }
     return IPC_OK;
 }
+
+int ipc_channel_check_peer(ipc_channel *ch, const char *waiting_for) { return check_peer(ch, waiting_for); }
+
+double ipc_channel_now_s(void) { return now_s(); }
 
 /* Shortest spin budget: a peer that answers fast is still noticed (and the
  * budget grows back) at the cost of a microsecond per wait. */
@@ -377,8 +363,13 @@ static void channel_free(ipc_channel *ch)
         atomic_store(&ch->heartbeat_stop, 1);
         pthread_join(ch->heartbeat, NULL);
     }
-    if (ch->hdr)
+    const int keep = ch->mpi ? g_mpi->close(ch) : 0; /* keep: a request may still refer to the image */
+    if (ch->image) {
+        if (!keep)
+            free(ch->base);
+    } else if (ch->hdr) {
         munmap(ch->base, ch->size);
+    }
     if (ch->linked)
         shm_unlink(ch->name);
     free(ch);
@@ -392,13 +383,72 @@ static void copy_err(char *err, size_t errlen, const char *msg)
 
 static double positive_or(double v, double def) { return v > 0 ? v : def; }
 
-int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, char *err, size_t errlen)
+int ipc_name_is_mpi(const char *name) { return name && strcmp(name, IPC_MPI_NAME) == 0; }
+
+/* A channel name: the MPI transport's, when it is started, or a segment's. */
+static int check_name(const char *name, char *err, size_t errlen)
 {
-    *out = NULL;
-    if (!ipc_name_valid(name)) {
+    if (ipc_name_is_mpi(name) && !g_mpi) {
+        copy_err(err, errlen, "channel \"" IPC_MPI_NAME "\": the MPI transport is not started in this process (it "
+                              "needs a build with MPI and an MPMD launch, mpirun -np N dem_server ... : -np 1 "
+                              "fem_server ...; ipc/PROTOCOL.md, \"The MPI transport\")");
+        return IPC_ERR_ARG;
+    }
+    if (!ipc_name_is_mpi(name) && !ipc_name_valid(name)) {
         copy_err(err, errlen, "invalid shared-memory name (want \"/\" then letters, digits, '.', '_', '-')");
         return IPC_ERR_ARG;
     }
+    return IPC_OK;
+}
+
+/* The MPI transport's private image of the segment, zero-filled as a new segment is. */
+static int image_new(ipc_channel *ch, uint64_t size)
+{
+    ch->base = aligned_alloc(IPC_PAGE, size); /* size is a whole number of pages */
+    if (!ch->base)
+        return set_err(ch, IPC_ERR_SYS, "out of memory for a %llu-byte exchange image",
+                       (unsigned long long)size);
+    memset(ch->base, 0, size);
+    ch->image = 1;
+    ch->hdr = (ipc_segment_header *)ch->base;
+    ch->size = size;
+    return IPC_OK;
+}
+
+/* The ring's segment: created (never reused), sized and mapped. */
+static int segment_create(ipc_channel *ch, const char *name, const ipc_layout *lay)
+{
+    int fd = shm_open(name, O_CREAT | O_EXCL | O_RDWR, 0600);
+    if (fd < 0) {
+        if (errno == EEXIST)
+            return set_err(ch, IPC_ERR_STALE,
+                           "shared-memory segment %s already exists (left by another run?): refusing to reuse it; "
+                           "remove /dev/shm%s or choose another name",
+                           name, name);
+        return set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", name, strerror(errno));
+    }
+    ch->linked = 1;
+    if (ftruncate(fd, (off_t)lay->segment_size) != 0) {
+        close(fd);
+        return set_err(ch, IPC_ERR_SYS, "sizing %s to %llu bytes: %s", name, (unsigned long long)lay->segment_size,
+                       strerror(errno));
+    }
+    void *p = mmap(NULL, lay->segment_size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+    close(fd);
+    if (p == MAP_FAILED)
+        return set_err(ch, IPC_ERR_SYS, "mmap %s: %s", name, strerror(errno));
+    ch->base = p;
+    ch->hdr = p;
+    ch->size = lay->segment_size;
+    return IPC_OK;
+}
+
+int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, char *err, size_t errlen)
+{
+    *out = NULL;
+    int rc = check_name(name, err, errlen);
+    if (rc)
+        return rc;
     ipc_layout lay;
     uint32_t slots = def->ring_slots ? def->ring_slots : 2;
     if (ipc_layout_compute(def->n_nodes, def->n_tris, slots, &lay) != 0) {
@@ -413,34 +463,10 @@ int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, c
         copy_err(err, errlen, "out of memory");
         return IPC_ERR_SYS;
     }
-    int rc = IPC_OK;
-    int fd = shm_open(name, O_CREAT | O_EXCL | O_RDWR, 0600);
-    if (fd < 0) {
-        if (errno == EEXIST)
-            rc = set_err(ch, IPC_ERR_STALE,
-                         "shared-memory segment %s already exists (left by another run?): refusing to reuse it; "
-                         "remove /dev/shm%s or choose another name",
-                         name, name);
-        else
-            rc = set_err(ch, IPC_ERR_SYS, "shm_open %s: %s", name, strerror(errno));
+    const int mpi = ipc_name_is_mpi(name);
+    rc = mpi ? image_new(ch, lay.segment_size) : segment_create(ch, name, &lay);
+    if (rc)
         goto fail;
-    }
-    ch->linked = 1;
-    if (ftruncate(fd, (off_t)lay.segment_size) != 0) {
-        rc = set_err(ch, IPC_ERR_SYS, "sizing %s to %llu bytes: %s", name, (unsigned long long)lay.segment_size,
-                     strerror(errno));
-        close(fd);
-        goto fail;
-    }
-    void *p = mmap(NULL, lay.segment_size, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
-    close(fd);
-    if (p == MAP_FAILED) {
-        rc = set_err(ch, IPC_ERR_SYS, "mmap %s: %s", name, strerror(errno));
-        goto fail;
-    }
-    ch->base = p;
-    ch->hdr = p;
-    ch->size = lay.segment_size;
     ch->lay = lay;
     ch->n_nodes = def->n_nodes;
     ch->n_tris = def->n_tris;
@@ -470,6 +496,13 @@ int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, c
         h->payload_len[r] = lay.payload_len[r];
     }
     h->fem_exchange_dt = def->exchange_dt;
+    if (mpi) { /* no semaphores, pid or heartbeat: messages, and mpirun watches the processes */
+        if ((rc = g_mpi->open(ch)) || (rc = g_mpi->post_receives(ch)))
+            goto fail;
+        atomic_store_explicit(&h->magic, IPC_MAGIC, memory_order_release);
+        *out = ch;
+        return IPC_OK;
+    }
     int sem_ok = sem_init(&h->sem_hello, 1, 0) == 0 && sem_init(&h->sem_ack, 1, 0) == 0;
     for (int r = IPC_ROLE_FEM; r <= IPC_ROLE_DEM; r++)
         sem_ok = sem_ok && sem_init(&h->sem_full[r], 1, 0) == 0 && sem_init(&h->sem_empty[r], 1, slots) == 0;
@@ -497,7 +530,8 @@ int ipc_accept(ipc_channel *ch)
         return set_err(ch, IPC_ERR_ARG, "ipc_accept is for the FEM side");
     ipc_segment_header *h = ch->hdr;
     atomic_store_explicit(&h->surface_ready, 1, memory_order_release);
-    int rc = wait_sem(ch, &h->sem_hello, &ch->spin_budget[1], ch->connect_timeout, "the DEM's hello", NULL);
+    int rc = ch->mpi ? g_mpi->publish_and_wait_hello(ch, ch->connect_timeout)
+                     : wait_sem(ch, &h->sem_hello, &ch->spin_budget[1], ch->connect_timeout, "the DEM's hello", NULL);
     /* The DEM attached (or never will): nobody else needs the name. */
     if (ch->linked) {
         shm_unlink(ch->name);
@@ -530,14 +564,18 @@ int ipc_accept(ipc_channel *ch)
         }
     }
     if (rc) {
-        record_failure(ch, reason);
-        sem_post(&h->sem_ack);
+        record_failure(ch, reason); /* over MPI this is the answer */
+        if (!ch->mpi)
+            sem_post(&h->sem_ack);
         return set_err(ch, rc, "refused the DEM peer: %s", reason);
     }
     ch->dem_dt = dem_dt;
     ch->exchange_every = every;
     atomic_store(&h->state, IPC_STATE_RUNNING);
-    sem_post(&h->sem_ack);
+    if (ch->mpi)
+        g_mpi->send_state(ch);
+    else
+        sem_post(&h->sem_ack);
     return IPC_OK;
 }
 
@@ -659,13 +697,89 @@ static int surface_published(ipc_channel *ch, void *arg) /* 4. the FEM side's su
     return atomic_load_explicit(&ch->hdr->surface_ready, memory_order_acquire) != 0;
 }
 
+/* 4b. The surface published: check it. 5. Hello: our version and time
+ * step; the FEM accepts or refuses. */
+static int say_hello(ipc_channel *ch, const ipc_attach_def *def, uint32_t my_version)
+{
+    ipc_segment_header *h = ch->hdr;
+    int rc = check_surface(ch);
+    if (rc) {
+        record_failure(ch, ch->err);
+        return rc;
+    }
+    h->dem_version = my_version;
+    h->dem_dt = def->dt;
+    h->dem_exchange_every = def->exchange_every;
+    if (ch->mpi) {
+        rc = g_mpi->hello_and_wait_answer(ch, ch->connect_timeout);
+    } else {
+        sem_post(&h->sem_hello);
+        rc = wait_sem(ch, &h->sem_ack, &ch->spin_budget[1], ch->connect_timeout, "the FEM's answer to our hello",
+                      NULL);
+    }
+    if (rc)
+        return rc;
+    if (atomic_load(&h->state) != IPC_STATE_RUNNING) {
+        char reason[IPC_REASON_LEN];
+        memcpy(reason, h->fail_reason, sizeof reason);
+        reason[IPC_REASON_LEN - 1] = '\0';
+        return set_err(ch, strstr(reason, "version") ? IPC_ERR_VERSION : IPC_ERR_MISMATCH,
+                       "FEM peer refused the handshake: %s", reason);
+    }
+    ch->dem_dt = def->dt;
+    ch->exchange_every = def->exchange_every;
+    return IPC_OK;
+}
+
+/* The MPI transport's steps 1-4: the FEM's header and surface arrive as one
+ * message, checked as a segment's would be (check_header) before the image
+ * of the whole layout is made from it. */
+static int attach_image(ipc_channel *ch, uint32_t my_version, uint32_t expect_nodes)
+{
+    void *buf = NULL;
+    size_t bytes = 0;
+    int rc = g_mpi->open(ch);
+    if (rc || (rc = g_mpi->receive_surface(ch, &buf, &bytes)))
+        return rc;
+    ipc_segment_header *h = buf;
+    if (bytes < sizeof *h || atomic_load(&h->magic) != IPC_MAGIC) {
+        free(buf);
+        return set_err(ch, IPC_ERR_STALE, "%s: the FEM peer's first message (%zu bytes) has no valid header (bad "
+                       "magic): not a peer of this protocol", ch->name, bytes);
+    }
+    ipc_layout lay;
+    if (ipc_layout_compute(h->n_nodes, h->n_tris, h->ring_slots, &lay) != 0) {
+        ch->base = buf; /* check_header names what is out of range (and tells the peer) */
+        ch->image = 1;
+        ch->hdr = buf;
+        ch->size = bytes;
+        return check_header(ch, bytes, my_version, expect_nodes);
+    }
+    if (lay.ring_offset[IPC_ROLE_FEM] != bytes) {
+        ch->base = buf; /* record_failure writes into it; channel_free frees it */
+        ch->image = 1;
+        ch->hdr = buf;
+        ch->size = bytes;
+        rc = set_err(ch, IPC_ERR_SIZE, "%s: size mismatch: header and surface in %zu bytes, the header's counts "
+                     "imply %llu", ch->name, bytes, (unsigned long long)lay.ring_offset[IPC_ROLE_FEM]);
+        record_failure(ch, ch->err);
+        return rc;
+    }
+    rc = image_new(ch, lay.segment_size);
+    if (rc == IPC_OK)
+        memcpy(ch->base, buf, bytes);
+    free(buf);
+    if (rc || (rc = check_header(ch, ch->size, my_version, expect_nodes)))
+        return rc;
+    return g_mpi->post_receives(ch);
+}
+
 int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, char *err, size_t errlen)
 {
     *out = NULL;
-    if (!ipc_name_valid(name)) {
-        copy_err(err, errlen, "invalid shared-memory name (want \"/\" then letters, digits, '.', '_', '-')");
-        return IPC_ERR_ARG;
-    }
+    int rc = check_name(name, err, errlen);
+    if (rc)
+        return rc;
     if (!(def->dt > 0 && isfinite(def->dt)) || def->exchange_every < 1) {
         copy_err(err, errlen, "ipc_attach: dt must be > 0 and exchange_every >= 1");
         return IPC_ERR_ARG;
@@ -682,7 +796,12 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
     ch->stop_flag = def->stop_flag;
     uint32_t my_version = def->version ? def->version : IPC_VERSION;
     double t0 = now_s();
-    int rc = IPC_OK;
+    if (ipc_name_is_mpi(name)) {
+        if ((rc = attach_image(ch, my_version, def->expect_nodes)) || (rc = say_hello(ch, def, my_version)))
+            goto fail;
+        *out = ch;
+        return IPC_OK;
+    }
 
     /* 1. Wait for the FEM side to create the segment (either may start first). */
     char late[600];
@@ -757,30 +876,9 @@ int ipc_attach(const char *name, const ipc_attach_def *def, ipc_channel **out, c
     rc = poll_until(ch, t0, 1000, 1, surface_published, NULL, "the interface surface", IPC_ERR_TIMEOUT, late);
     if (rc)
         goto fail;
-    rc = check_surface(ch);
-    if (rc) {
-        record_failure(ch, ch->err);
-        goto fail;
-    }
-
-    /* 5. Hello: our version and time step; the FEM accepts or refuses. */
-    h->dem_version = my_version;
-    h->dem_dt = def->dt;
-    h->dem_exchange_every = def->exchange_every;
-    sem_post(&h->sem_hello);
-    rc = wait_sem(ch, &h->sem_ack, &ch->spin_budget[1], ch->connect_timeout, "the FEM's answer to our hello", NULL);
+    rc = say_hello(ch, def, my_version);
     if (rc)
         goto fail;
-    if (atomic_load(&h->state) != IPC_STATE_RUNNING) {
-        char reason[IPC_REASON_LEN];
-        memcpy(reason, h->fail_reason, sizeof reason);
-        reason[IPC_REASON_LEN - 1] = '\0';
-        rc = set_err(ch, strstr(reason, "version") ? IPC_ERR_VERSION : IPC_ERR_MISMATCH,
-                     "FEM peer refused the handshake: %s", reason);
-        goto fail;
-    }
-    ch->dem_dt = def->dt;
-    ch->exchange_every = def->exchange_every;
     *out = ch;
     return IPC_OK;
 fail:
@@ -833,7 +931,8 @@ int ipc_send_begin(ipc_channel *ch, ipc_frame_head **head, double **payload)
         return rc;
     char what[96];
     snprintf(what, sizeof what, "a free slot for exchange %llu", (unsigned long long)ch->send_seq);
-    rc = wait_sem(ch, &ch->hdr->sem_empty[ch->peer], &ch->spin_budget[1], 0, what, &ch->stats.wait_send_s);
+    rc = ch->mpi ? g_mpi->wait_slot(ch, what)
+                 : wait_sem(ch, &ch->hdr->sem_empty[ch->peer], &ch->spin_budget[1], 0, what, &ch->stats.wait_send_s);
     if (rc)
         return rc;
     ipc_frame_head *f = slot(ch, ch->peer, ch->send_seq);
@@ -854,9 +953,15 @@ int ipc_send_commit(ipc_channel *ch)
     if (ch->flags & IPC_SEG_CHECKSUM)
         f->checksum = ipc_checksum(f + 1, ch->lay.payload_len[ch->peer] * sizeof(double));
     ch->send_open = 0;
+    if (ch->mpi) {
+        int rc = g_mpi->send_frame(ch);
+        if (rc)
+            return rc;
+    }
     ch->send_seq++;
     ch->stats.frames_sent++;
-    sem_post(&ch->hdr->sem_full[ch->peer]);
+    if (!ch->mpi)
+        sem_post(&ch->hdr->sem_full[ch->peer]);
     return IPC_OK;
 }
 
@@ -869,7 +974,10 @@ int ipc_recv(ipc_channel *ch, const ipc_frame_head **head, const double **payloa
         return rc;
     char what[96];
     snprintf(what, sizeof what, "exchange %llu", (unsigned long long)ch->recv_seq);
-    rc = wait_sem(ch, &ch->hdr->sem_full[ch->role], &ch->spin_budget[0], 0, what, &ch->stats.wait_recv_s);
+    rc = ch->mpi ? g_mpi->wait_frame(ch, what)
+                 : wait_sem(ch, &ch->hdr->sem_full[ch->role], &ch->spin_budget[0], 0, what, &ch->stats.wait_recv_s);
+    if (rc == IPC_ERR_PROTOCOL && ch->mpi) /* a frame of the wrong size: the peer hears why, as below */
+        record_failure(ch, ch->err);
     if (rc)
         return rc;
     ipc_frame_head *f = slot(ch, ch->role, ch->recv_seq);
@@ -906,9 +1014,15 @@ int ipc_recv_release(ipc_channel *ch)
     if (!ch->recv_open)
         return set_err(ch, IPC_ERR_ARG, "ipc_recv_release without ipc_recv");
     ch->recv_open = 0;
+    if (ch->mpi) {
+        int rc = g_mpi->release_frame(ch); /* reposts the receive of slot recv_seq for recv_seq + slots */
+        if (rc)
+            return rc;
+    }
     ch->recv_seq++;
     ch->stats.frames_received++;
-    sem_post(&ch->hdr->sem_empty[ch->role]);
+    if (!ch->mpi)
+        sem_post(&ch->hdr->sem_empty[ch->role]);
     return IPC_OK;
 }
 
@@ -932,7 +1046,8 @@ void ipc_close(ipc_channel **chp, int status)
     if (ch->hdr) {
         if (status == IPC_OK) {
             uint32_t running = IPC_STATE_RUNNING;
-            atomic_compare_exchange_strong(&ch->hdr->state, &running, IPC_STATE_FINISHED);
+            if (atomic_compare_exchange_strong(&ch->hdr->state, &running, IPC_STATE_FINISHED) && ch->mpi)
+                g_mpi->send_state(ch); /* with the count of frames sent: the peer takes them first */
         } else if (atomic_load(&ch->hdr->state) != IPC_STATE_FAILED) {
             char reason[sizeof ch->err + 64]; /* record_failure truncates to the header's size */
             snprintf(reason, sizeof reason, "%s: %s", ipc_status_name(status), ch->err[0] ? ch->err : "stopped");

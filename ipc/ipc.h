@@ -17,6 +17,9 @@
  * a check of the peer's liveness (pid and heartbeat), so a dead, stopped or
  * failed peer is noticed within about a second.
  *
+ * The same protocol runs over MPI between hosts when the channel is named
+ * IPC_MPI_NAME (below; ipc_mpi.h, PROTOCOL.md "The MPI transport").
+ *
  * Usage, FEM side:                      DEM side:
  *   ipc_create(name, &def, &ch)           ipc_attach(name, &def, &ch)
  *   fill ipc_surface_nodes/_tris(ch)        (surface readable with the same calls)
@@ -141,6 +144,16 @@ ipc_attach_def ipc_default_attach_def(void);
 
 /* A valid segment name: "/" followed by 1..200 of [A-Za-z0-9._-]. */
 int ipc_name_valid(const char *name);
+
+/* The transport is chosen by the channel name given to ipc_create and
+ * ipc_attach: a segment name ("/...") is the shared-memory ring on one
+ * host; IPC_MPI_NAME is the same protocol over MPI, between the first ranks
+ * of the two programs of one MPMD job (mpirun -np N dem_server ... : -np 1
+ * fem_server ...), which works across hosts. It needs ipc_mpi_start()
+ * (ipc_mpi.h, built with MPI) in both programs; else the name is refused.
+ * Everything else (calls, frames, checks, errors) is the same. */
+#define IPC_MPI_NAME "mpi"
+int ipc_name_is_mpi(const char *name);
 
 /* FEM side. Creates the segment (fails with IPC_ERR_STALE if the name exists). */
 int ipc_create(const char *name, const ipc_create_def *def, ipc_channel **out, char *err, size_t errlen);

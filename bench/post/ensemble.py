@@ -29,11 +29,19 @@ bed's own effect, which dominates the scatter of either ensemble alone:
   and the unpaired interval (both ensembles' half-widths in quadrature) for
   what the same seeds would give unpaired.
 
-usage: ensemble.py RUN_DIR... [--target Q=H ...] [--against BASE_DIR...] [--json OUT]
+A run may also be given as a row of bench/slip_sweep's result file (which
+holds the same statistics, copied from each run's summary.json): FILE.csv
+(a file of one row) or FILE.csv@SLIP[,TIRE] (the row of that slip in
+percent, tire "elastic" unless given). Such runs are paired in the order
+given (the file does not say which bed it ran on).
+
+usage: ensemble.py RUN... [--target Q=H ...] [--against BASE_RUN...] [--json OUT]
    e.g. ensemble.py out/default/seed1 out/default/seed2 out/default/seed3 --target T_P_per_W=0.02
         ensemble.py out/rigid-seeds/seed{1,2,3} --against out/default-seeds/seed{1,2,3}
+        ensemble.py res/slip_sweep-rigid-seed{1,2,3}.csv@5 --against res/slip_sweep-base-seed{1,2,3}.csv@5
 """
 import argparse
+import csv
 import json
 import math
 import os
@@ -143,9 +151,53 @@ def report_paired(res, out=sys.stdout):
             "resolved" if e["resolved"] else "within the noise"))
 
 
+# slip_sweep's columns (bench/slip_sweep/run COLUMNS) of each reported
+# quantity: mean, 95 % half-width, unit
+SWEEP_COLUMNS = {"T_H": ("T_H_mean_N", "T_H_ci95_N", "N"), "T_R": ("T_R_mean_N", "T_R_ci95_N", "N"),
+                 "T_P": ("T_P_mean_N", "T_P_ci95_N", "N"), "load": ("Fz_mean_N", "Fz_ci95_N", "N"),
+                 "sinkage": ("sinkage_mean_m", "sinkage_ci95_m", "m"),
+                 "T_H_per_W": ("T_H_per_W", "T_H_per_W_ci95", "1"), "T_R_per_W": ("T_R_per_W", "T_R_per_W_ci95", "1"),
+                 "T_P_per_W": ("T_P_per_W", "T_P_per_W_ci95", "1")}
+
+
+def is_sweep_row(arg):
+    return arg.partition("@")[0].endswith(".csv")
+
+
+def load_sweep_row(arg):
+    """A summary (as summary.json's) from a slip_sweep result row: FILE.csv[@SLIP[,TIRE]]."""
+    path, _, sel = arg.partition("@")
+    if not os.path.exists(path):
+        raise SystemExit("ensemble: %s: no such file" % path)
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if sel:
+        slip, _, tire = sel.partition(",")
+        try:
+            slip = float(slip)
+        except ValueError:
+            raise SystemExit("ensemble: %s: expected FILE.csv@SLIP[,TIRE], SLIP in percent" % arg)
+        rows = [r for r in rows if abs(float(r["slip_percent"]) - slip) < 1e-9 and r.get("tire", "elastic") == (tire or "elastic")]
+    if len(rows) != 1:
+        raise SystemExit("ensemble: %s: %d rows match; name one with FILE.csv@SLIP[,TIRE]" % (arg, len(rows)))
+    r = rows[0]
+    if r["status"] != "ok":
+        return {"travelled": False, "quantities": {}}
+    q = {}
+    for name, (mean, half, unit) in SWEEP_COLUMNS.items():
+        try:
+            q[name] = {"mean": float(r[mean]), "half_width": float(r[half]), "unit": unit}
+        except (KeyError, ValueError):
+            raise SystemExit("ensemble: %s: column %s or %s missing or not a number" % (arg, mean, half))
+    return {"travelled": True, "quantities": q}
+
+
 def load_summaries(dirs):
     out = []
     for d in dirs:
+        if is_sweep_row(d):
+            out.append(load_sweep_row(d))
+            continue
         p = os.path.join(d, "summary.json")
         if not os.path.exists(p):
             raise SystemExit("ensemble: %s has no summary.json (the run failed or is still running)" % d)
@@ -168,16 +220,18 @@ def report(res, out=sys.stdout):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("runs", nargs="+")
+    ap.add_argument("runs", nargs="+", help="run folders (summary.json) or slip_sweep rows FILE.csv[@SLIP[,TIRE]]")
     ap.add_argument("--target", action="append", default=[], help="QUANTITY=HALF_WIDTH, e.g. T_P_per_W=0.02")
     ap.add_argument("--json", help="write the result here")
-    ap.add_argument("--against", nargs="+", metavar="BASE_DIR",
+    ap.add_argument("--against", nargs="+", metavar="BASE_RUN",
                     help="base runs on the same beds, in the same order (folder names must match pairwise)")
     a = ap.parse_args(argv)
     if a.against:
         if len(a.against) != len(a.runs):
             ap.error("--against: %d base runs for %d runs" % (len(a.against), len(a.runs)))
         for r, b in zip(a.runs, a.against):
+            if is_sweep_row(r) or is_sweep_row(b):
+                continue  # result rows: paired in the order given
             rn, bn = os.path.basename(os.path.normpath(r)), os.path.basename(os.path.normpath(b))
             if rn != bn:
                 ap.error("--against: %s and %s are not the same bed (folder names %s and %s differ)" % (r, b, rn, bn))

@@ -12,7 +12,14 @@
  * With --ready-fd FD it announces where it is on that descriptor (a pipe the
  * test holds, tests/proc.h), one byte each: 'c' the FEM side has created the
  * segment, 'a' the DEM side is about to attach, 'x' the first exchange is
- * done (both sides). */
+ * done (both sides). With --ready-file PATH it creates the file PATH.<mark>
+ * holding its pid instead (under mpirun, whose processes inherit no pipe).
+ *
+ * --shm mpi: the MPI transport; launch both roles as one MPMD job,
+ *   mpirun -np 1 ipc_peer --role fem --shm mpi ... : -np 1 ipc_peer --role dem --shm mpi ...
+ * --fail-at K: this side gives up at exchange K with a reason (ipc_fail)
+ * that the other side must print. Each side ends with the line
+ * "ipc_peer ROLE: exit CODE" (under mpirun, where one status is left). */
 #include <errno.h>
 #include <math.h>
 #include <signal.h>
@@ -24,6 +31,9 @@
 
 #include "ipc.h"
 #include "proc.h"
+#ifdef DEMFEM_MPI
+#include "ipc_mpi.h"
+#endif
 
 static volatile sig_atomic_t g_stop;
 
@@ -37,8 +47,36 @@ typedef struct options {
     const char *role, *shm;
     unsigned nodes, tris, exchanges, every, version, expect_nodes, slots;
     double dt, expect_dt, stall, connect, spin_us;
-    int checksum, delay_ms, quiet, ready_fd;
+    int checksum, delay_ms, quiet, ready_fd, fail_at;
+    const char *ready_file;
 } options;
+
+/* Announces `mark` on the readiness pipe or as the file ready_file.<mark>
+ * (written whole, then renamed into place: it appears complete). */
+static void announce(const options *o, char mark)
+{
+    tp_announce(o->ready_fd, mark);
+    if (!o->ready_file)
+        return;
+    char tmp[620], path[600];
+    snprintf(path, sizeof path, "%s.%c", o->ready_file, mark);
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    FILE *f = fopen(tmp, "w");
+    if (!f)
+        return;
+    fprintf(f, "%d\n", (int)getpid());
+    if (fclose(f) == 0)
+        rename(tmp, path);
+}
+
+/* --fail-at: gives up at exchange n with a reason for the peer. */
+static int give_up(const options *o, ipc_channel **ch, unsigned long long n)
+{
+    ipc_fail(*ch, "ipc_peer %s gave up at exchange %llu (--fail-at)", o->role, n);
+    ipc_close(ch, IPC_ERR_PROTOCOL);
+    fprintf(stderr, "ipc_peer %s: error: gave up at exchange %llu\n", o->role, n);
+    return 3;
+}
 
 static double value(unsigned long long seq, size_t j)
 {
@@ -48,9 +86,10 @@ static double value(unsigned long long seq, size_t j)
 static int usage(void)
 {
     fprintf(stderr,
-            "usage: ipc_peer --role fem|dem --shm /NAME [--nodes N] [--tris M] [--exchanges K] [--dt S] "
+            "usage: ipc_peer --role fem|dem --shm /NAME|mpi [--nodes N] [--tris M] [--exchanges K] [--dt S] "
             "[--every K] [--expect-dt S] [--expect-nodes N] [--version V] [--checksum] [--slots S] "
-            "[--stall S] [--connect S] [--spin-us U] [--delay-ms D] [--ready-fd FD] [--quiet]\n");
+            "[--stall S] [--connect S] [--spin-us U] [--delay-ms D] [--ready-fd FD] [--ready-file PATH] "
+            "[--fail-at K] [--quiet]\n");
     return 2;
 }
 
@@ -78,7 +117,7 @@ static int run_fem(const options *o)
     int rc = ipc_create(o->shm, &def, &ch, err, sizeof err);
     if (rc)
         return fail("fem", 3, err);
-    tp_announce(o->ready_fd, 'c');
+    announce(o, 'c');
     double *x = ipc_surface_nodes(ch);
     uint32_t *t = ipc_surface_tris(ch);
     for (size_t i = 0; i < o->nodes; i++) {
@@ -106,6 +145,8 @@ static int run_fem(const options *o)
         if (rc)
             break;
         uint32_t kind = in->kind;
+        if (o->fail_at > 0 && n == (unsigned long long)o->fail_at)
+            return give_up(o, &ch, n);
         for (size_t j = 0; j < nf && kind == IPC_FRAME_DATA; j++)
             if (f[j] != value(n, j)) {
                 char m[200];
@@ -132,7 +173,7 @@ static int run_fem(const options *o)
         if (rc || kind == IPC_FRAME_FINISH)
             break;
         if (n == 0)
-            tp_announce(o->ready_fd, 'x');
+            announce(o, 'x');
     }
     if (rc) {
         fail("fem", 3, ipc_error(ch));
@@ -159,7 +200,7 @@ static int run_dem(const options *o)
     def.version = o->version;
     ipc_channel *ch;
     char err[512];
-    tp_announce(o->ready_fd, 'a');
+    announce(o, 'a');
     int rc = ipc_attach(o->shm, &def, &ch, err, sizeof err);
     if (rc)
         return fail("dem", 3, err);
@@ -174,6 +215,8 @@ static int run_dem(const options *o)
     unsigned long long n = 0;
     for (; n <= o->exchanges; n++) {
         int finish = n == o->exchanges;
+        if (o->fail_at > 0 && n == (unsigned long long)o->fail_at)
+            return give_up(o, &ch, n);
         ipc_frame_head *out;
         double *f;
         rc = ipc_send_begin(ch, &out, &f);
@@ -203,7 +246,7 @@ static int run_dem(const options *o)
             return fail("dem", 4, m);
         }
         if (n == 0)
-            tp_announce(o->ready_fd, 'x');
+            announce(o, 'x');
     }
     if (rc) {
         fail("dem", 3, ipc_error(ch));
@@ -241,6 +284,8 @@ int main(int argc, char **argv)
         else if (OPT("--spin-us")) o.spin_us = strtod(v, NULL);
         else if (OPT("--delay-ms")) o.delay_ms = atoi(v);
         else if (OPT("--ready-fd")) o.ready_fd = atoi(v);
+        else if (OPT("--ready-file")) o.ready_file = v;
+        else if (OPT("--fail-at")) o.fail_at = atoi(v);
         else if (strcmp(a, "--checksum") == 0) o.checksum = 1;
         else if (strcmp(a, "--quiet") == 0) o.quiet = 1;
         else return usage();
@@ -260,9 +305,18 @@ int main(int argc, char **argv)
         struct timespec ts = {o.delay_ms / 1000, (long)(o.delay_ms % 1000) * 1000000L};
         nanosleep(&ts, NULL);
     }
-    if (strcmp(o.role, "fem") == 0)
-        return run_fem(&o);
-    if (strcmp(o.role, "dem") == 0)
-        return run_dem(&o);
-    return usage();
+    if (strcmp(o.role, "fem") != 0 && strcmp(o.role, "dem") != 0)
+        return usage();
+#ifdef DEMFEM_MPI
+    MPI_Comm own;
+    char err[256];
+    if (ipc_mpi_start(&own, err, sizeof err))
+        return fail(o.role, 3, err);
+#endif
+    int rc = strcmp(o.role, "fem") == 0 ? run_fem(&o) : run_dem(&o);
+    fprintf(stderr, "ipc_peer %s: exit %d\n", o.role, rc);
+#ifdef DEMFEM_MPI
+    ipc_mpi_stop();
+#endif
+    return rc;
 }

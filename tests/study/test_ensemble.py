@@ -6,6 +6,7 @@ scatter is named, the seeds needed for a target are right; ./run refuses
 bad --seeds arguments.
 
 usage: test_ensemble.py CASE [BUILD_DIR]   (ctest runs one case per entry)"""
+import csv
 import json
 import math
 import os
@@ -142,6 +143,51 @@ def paired_difference():
     ensure(p.returncode == 2 and "not the same bed" in p.stderr, p.stderr)
 
 
+def reads_sweep_rows():
+    # slip_sweep's result rows stand for runs (written with slip_sweep's own
+    # column list, so a renamed column fails here): a known shift of 3 N in
+    # T_P on three beds, two slips and two tires per file
+    import importlib.machinery
+    import importlib.util
+    loader = importlib.machinery.SourceFileLoader("slip_sweep", os.path.join(ROOT, "bench", "slip_sweep", "run"))
+    sweep = importlib.util.module_from_spec(importlib.util.spec_from_loader("slip_sweep", loader))
+    loader.exec_module(sweep)
+    tmp = tempfile.mkdtemp()
+
+    def write(name, tp, sink, status="ok"):
+        path = os.path.join(tmp, name)
+        with open(path, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=sweep.COLUMNS, restval="")
+            w.writeheader()
+            for slip, tire, off in ((5, "elastic", 0.0), (5, "rigid", 100.0), (20, "elastic", 50.0)):
+                row = {c: "0" for c in sweep.COLUMNS if c.endswith(("_N", "_m", "_W", "_ci95"))}
+                row.update(slip_percent=slip, tire=tire, status=status if off == 0.0 else "ok",
+                           T_P_mean_N=tp + off, T_P_ci95_N=0.5, sinkage_mean_m=sink, sinkage_ci95_m=1e-4)
+                w.writerow(row)
+        return path + "@5"
+
+    base = [write("base%d.csv" % k, tp, 0.04 + 0.001 * k) for k, tp in enumerate((-30.0, -45.0, -20.0))]
+    var = [write("var%d.csv" % k, tp + 3.0, 0.04 + 0.001 * k) for k, tp in enumerate((-30.0, -45.0, -20.0))]
+    s = ensemble.load_summaries(base)
+    ensure([r["quantities"]["T_P"]["mean"] for r in s] == [-30.0, -45.0, -20.0], s)
+    ensure(ensemble.load_summaries([base[0][:-2] + "@5,rigid"])[0]["quantities"]["T_P"]["mean"] == 70.0, "tire")
+    out = os.path.join(tmp, "d.json")
+    script = os.path.join(ROOT, "bench", "post", "ensemble.py")
+    p = subprocess.run([sys.executable, script] + var + ["--against"] + base + ["--json", out],
+                       capture_output=True, text=True)
+    ensure(p.returncode == 0, p.stderr)
+    with open(out) as f:
+        d = json.load(f)["difference"]
+    ensure(abs(d["T_P"]["difference"] - 3.0) < 1e-12 and d["T_P"]["resolved"], d["T_P"])
+    ensure(abs(d["sinkage"]["difference"]) < 1e-15 and not d["sinkage"]["resolved"], d["sinkage"])
+    # a file of several rows without a slip, a slip not in it: refused, named
+    for arg in (base[0][:-2], base[0][:-2] + "@30"):
+        p = subprocess.run([sys.executable, script, arg], capture_output=True, text=True)
+        ensure(p.returncode != 0 and "rows match" in p.stderr, p.stderr)
+    # a failed run's row counts as not travelled
+    ensure(not ensemble.load_summaries([write("bad.csv", 0.0, 0.0, "failed (exit 1)")])[0]["travelled"], "status")
+
+
 def launcher_refuses_bad_seeds():
     env = dict(os.environ, DEMFEM_NO_BUILD="1")
     scene = os.path.join(ROOT, "tests", "coupling", "scenes", "tire_small.cfg")
@@ -152,7 +198,7 @@ def launcher_refuses_bad_seeds():
 
 
 CASES = {f.__name__: f for f in (coverage_known_mean, dominant_named, seeds_for_target, reads_summaries_from_runs,
-                                 paired_difference, launcher_refuses_bad_seeds)}
+                                 paired_difference, reads_sweep_rows, launcher_refuses_bad_seeds)}
 
 if __name__ == "__main__":
     CASES[sys.argv[1]]()

@@ -352,14 +352,14 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     const int np = w->n_pairs;
     const spring_carry sc = spring_carry_of(w);
-    if (t_n == 1) {
-        for (int p = 0; p < np; p++) {
-            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+    /* the table in pair order; the springs with it on one thread, after it
+     * over the threads (lookups only, any order) */
+    for (int p = 0; p < np; p++) {
+        nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+        if (t_n == 1)
             carry_spring(&sc, p);
-        }
-    } else { /* the table in pair order, then the springs: lookups only, any order */
-        for (int p = 0; p < np; p++)
-            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+    }
+    if (t_n > 1) {
 #ifdef _OPENMP
 #pragma omp parallel for num_threads(t_n) schedule(static)
 #endif

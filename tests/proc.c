@@ -236,6 +236,36 @@ void tp_print_log(const tp_proc *p)
     fprintf(stderr, "---- %s ----\n%s---- end of %s ----\n", p->log, tp_log_text(p), p->log);
 }
 
+/* The record's text (a few hundred bytes) in buf; -1 when unreadable. */
+static int record_text(const char *dir, const char *name, char *buf, size_t cap)
+{
+    char path[400];
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return -1;
+    size_t n = fread(buf, 1, cap - 1, f);
+    fclose(f);
+    buf[n] = '\0';
+    return 0;
+}
+
+int tp_record_num(const char *dir, const char *name, const char *key, double *v)
+{
+    char text[8192], pat[80];
+    if (record_text(dir, name, text, sizeof text))
+        return -1;
+    snprintf(pat, sizeof pat, "\"%s\": ", key);
+    const char *p = strstr(text, pat);
+    return p && sscanf(p + strlen(pat), "%lf", v) == 1 ? 0 : -1;
+}
+
+int tp_record_has(const char *dir, const char *name, const char *needle)
+{
+    char text[8192];
+    return record_text(dir, name, text, sizeof text) == 0 && strstr(text, needle) != NULL;
+}
+
 void tp_announce(int fd, char mark)
 {
     if (fd < 0)

@@ -82,6 +82,12 @@ const char *tp_log_text(const tp_proc *p);
 int tp_log_has(const tp_proc *p, const char *needle);
 void tp_print_log(const tp_proc *p);
 
+/* A server's run record (DIR/NAME, common/runrec.h, e.g. dem_run.json):
+ * the number after "key": (0 when found, -1 otherwise); whether its text
+ * contains needle. */
+int tp_record_num(const char *dir, const char *name, const char *key, double *v);
+int tp_record_has(const char *dir, const char *name, const char *needle);
+
 /* Child side: writes `mark` on the readiness pipe handed down as fd (from a
  * command-line option); a no-op for fd < 0. */
 void tp_announce(int fd, char mark);

@@ -198,6 +198,14 @@ def scene_get(scene, key):
     return v
 
 
+def split_settings(text):
+    """The KEY=VALUE items of a study's settings column ("k=v; k=v", as
+    bench/study/run writes it): split at "; " only where a key follows, since
+    a value (a list of groups, e.g. dem.bed.layers) has "; " of its own."""
+    import re
+    return [s.strip() for s in re.split(r";\s*(?=[A-Za-z][-A-Za-z0-9_.\[\]]*=)", text or "") if s.strip()]
+
+
 def libconfig_value(v):
     """A Python value (as resolved_scene gives) as libconfig value text, for
     --set: floats always with a point, groups as { k = v; }, lists of groups

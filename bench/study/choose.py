@@ -12,7 +12,10 @@ $DEMFEM_STUDY_RESULTS), written by bench/study/run.
 
 Among the study's runs that finished stable and whose relative error of the
 quantity is within the tolerance, the one with the shortest wall time is
-chosen. Traction is best asked per actual load: drawbar_coefficient (T_P/W),
+chosen. In a study over several beds (bench/study/run, "seeds") a row is a
+setting's mean over the beds and its error a paired difference with the
+reference bed by bed: the error plus its 95 % half-width (_err_ci95) must be
+within the tolerance. Traction is best asked per actual load: drawbar_coefficient (T_P/W),
 gross_traction_coefficient (T_H/W), running_resistance_coefficient (T_R/W)
 and sinkage_per_radius (sinkage/R) take an ABSOLUTE tolerance (0.02 means
 |T_P/W - reference| <= 0.02; a percentage is refused for them): the drawbar
@@ -132,6 +135,10 @@ def choose(rows, quantity, tol, source):
         if r["status"] != "ok" or r.get("stable") != "yes" or r["knob"] == "dem.bed.seed":
             continue  # (the seed runs measure the noise, they are not settings)
         e = noise if r["run"] == "reference" else fnum(r.get(quantity + "_err"))
+        if r["run"] != "reference" and r.get(quantity + "_err_ci95"):
+            # a study over several beds: the error is a paired mean over the beds; the
+            # setting must meet the tolerance with its 95 % interval, not only on average
+            e += fnum(r[quantity + "_err_ci95"])
         w = fnum(r.get("wall_s"))
         if math.isfinite(e) and math.isfinite(w):
             scored.append((w, e, r))
@@ -153,7 +160,7 @@ def choose(rows, quantity, tol, source):
 
 
 def settings_of(row):
-    return [s.strip() for s in row["settings"].split(";") if s.strip()]
+    return runio.split_settings(row["settings"])
 
 
 def main(argv=None):

@@ -220,9 +220,39 @@ def wong_reece_slip_shape():
     ensure(all(b_ >= a_ for a_, b_ in zip(z, z[1:])), "sinkage not growing with slip")
 
 
+def slip_sweep_wong():
+    # bench/slip_sweep/run --wong: the rigid wheel beside a sweep, with the
+    # base scene's wheel (shinone.cfg: R 0.2675 m, b 0.17 m, 980 N) on the
+    # soil scene's scm.soil, one curve per K; nothing run (--no-run).
+    import csv
+    import subprocess
+    import tempfile
+    build = os.environ.get("DEMFEM_BUILD_DIR", os.path.join(ROOT, "build"))
+    out = tempfile.mkdtemp(prefix="demfem-wong-")
+    p = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "slip_sweep", "run"), build, out,
+                        "--scene", os.path.join(ROOT, "scenes", "shinone.cfg"), "--slips", "10", "40",
+                        "--work", os.path.join(out, "w"), "--tag", "t", "--no-run",
+                        "--wong", os.path.join(ROOT, "scenes", "shinone_scm.cfg"), "--wong-K", "0.0004", "0.1"],
+                       capture_output=True, text=True)
+    ensure(p.returncode != 2, p.stderr)  # (1: the sweep's runs were not run)
+    rows = list(csv.DictReader(open(os.path.join(out, "slip_sweep-t-wong.csv"))))
+    ensure(len(rows) == 80 and abs(float(rows[-1]["slip_percent"]) - 40.0) < 1e-9, len(rows))
+    for r in rows:  # the load carried is the scene's
+        ensure(abs(float(r["load_N"]) - 980.0) < 0.5, r)
+    soil = {"k_c": -5733.0, "k_phi": 4.125e5, "n": 0.703, "c": 557.0, "phi_deg": 37.4}
+    ref = tm.wong_reece(0.2675, 0.17, 980.0, 0.4, dict(soil, K=0.1))
+    last = [r for r in rows if r["K_m"] == "0.1"][-1]
+    ensure(rel(float(last["drawbar_pull_N"]), ref["drawbar_pull"]) < 1e-5, (last, ref))
+    # a stiffer shear response (smaller K) mobilises more thrust at every slip
+    small = {r["slip_percent"]: float(r["thrust_N"]) for r in rows if r["K_m"] == "0.0004"}
+    large = {r["slip_percent"]: float(r["thrust_N"]) for r in rows if r["K_m"] == "0.1"}
+    ensure(all(small[k] > large[k] for k in small), "K made no difference")
+    ensure(os.path.exists(os.path.join(out, "slip_sweep-t-drawbar.png")), "chart")
+
+
 CASES = {f.__name__: f for f in (bekker_exact, bekker_noisy, bekker_needs_two_widths, mohr_coulomb_exact,
                                  janosi_exact_and_noisy, bekker_runs_coverage, mohr_coulomb_ci_coverage,
-                                 wong_reece_compaction, wong_reece_slip_shape)}
+                                 wong_reece_compaction, wong_reece_slip_shape, slip_sweep_wong)}
 
 if __name__ == "__main__":
     names = sys.argv[1:] or list(CASES)

@@ -230,36 +230,6 @@ static int last_row(const char *dir, const char *const *cols, double *vals, int 
 /* The whole pipeline on a small tire and bed: sinkage to the load, travel,
  * summary. The nodal forces the FEM receives balance the DEM's contact totals
  * to round-off, and both sides agree on the interface work. */
-/* A server's run record (DIR/NAME, common/runrec.h): the number after
- * "key": (0 when found), and its text. */
-static int record_num(const char *dir, const char *name, const char *key, double *v)
-{
-    char path[400], text[8192], pat[80];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "r");
-    if (!f)
-        return -1;
-    size_t n = fread(text, 1, sizeof text - 1, f);
-    fclose(f);
-    text[n] = '\0';
-    snprintf(pat, sizeof pat, "\"%s\": ", key);
-    const char *p = strstr(text, pat);
-    return p && sscanf(p + strlen(pat), "%lf", v) == 1 ? 0 : -1;
-}
-
-static int record_has(const char *dir, const char *name, const char *needle)
-{
-    char path[400], text[8192];
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    FILE *f = fopen(path, "r");
-    if (!f)
-        return 0;
-    size_t n = fread(text, 1, sizeof text - 1, f);
-    fclose(f);
-    text[n] = '\0';
-    return strstr(text, needle) != NULL;
-}
-
 /* A double attribute of wheel.h5's root (the profile). */
 static int wheel_attr(const char *dir, const char *name, double *v)
 {
@@ -316,15 +286,15 @@ static int tire_small_runs(void)
     /* The run records (what scripts read instead of the logs): both sides
      * ended well, after the same exchanges, one per traction.csv row. */
     double dem_ex = 0, fem_ex = 0, dem_rc = 1, fem_rc = 1, tets = 0, lim = 0;
-    ENSURE(record_num(l.out, "dem_run.json", "exchanges", &dem_ex) == 0 &&
-           record_num(l.out, "fem_run.json", "exchanges", &fem_ex) == 0);
-    ENSURE(record_num(l.out, "dem_run.json", "exit_code", &dem_rc) == 0 && dem_rc == 0);
-    ENSURE(record_num(l.out, "fem_run.json", "exit_code", &fem_rc) == 0 && fem_rc == 0);
-    ENSURE(record_num(l.out, "fem_run.json", "tets", &tets) == 0 && tets > 100);
-    ENSURE(record_num(l.out, "fem_run.json", "dt_limit", &lim) == 0 && lim > 0);
+    ENSURE(tp_record_num(l.out, "dem_run.json", "exchanges", &dem_ex) == 0 &&
+           tp_record_num(l.out, "fem_run.json", "exchanges", &fem_ex) == 0);
+    ENSURE(tp_record_num(l.out, "dem_run.json", "exit_code", &dem_rc) == 0 && dem_rc == 0);
+    ENSURE(tp_record_num(l.out, "fem_run.json", "exit_code", &fem_rc) == 0 && fem_rc == 0);
+    ENSURE(tp_record_num(l.out, "fem_run.json", "tets", &tets) == 0 && tets > 100);
+    ENSURE(tp_record_num(l.out, "fem_run.json", "dt_limit", &lim) == 0 && lim > 0);
     ENSURE_MSG(dem_ex == fem_ex && dem_ex == rows, "exchanges: DEM %g, FEM %g, traction.csv %d rows", dem_ex, fem_ex,
                rows);
-    ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"\""));
+    ENSURE(tp_record_has(l.out, "fem_run.json", "\"error\": \"\""));
     /* The FEM's cost, from its profile in wheel.h5: every stage has its CPU
      * time beside its wall time; the advance's is not zero and, fem_server
      * being one thread, no more than its wall time. */
@@ -352,8 +322,8 @@ static int tire_unstable_exchange_stopped(void)
     ENSURE(strstr(log, "[fem] error: coupling unstable") && strstr(log, "reduce coupling.dt"));
     ENSURE(strstr(log, "[dem] error: peer fem failed"));
     /* The run records say the same (bench/study/run reads these). */
-    ENSURE(record_has(l.out, "fem_run.json", "\"error\": \"coupling unstable"));
-    ENSURE(record_has(l.out, "dem_run.json", "\"error\": \"peer fem failed"));
+    ENSURE(tp_record_has(l.out, "fem_run.json", "\"error\": \"coupling unstable"));
+    ENSURE(tp_record_has(l.out, "dem_run.json", "\"error\": \"peer fem failed"));
     ENSURE(shm_clean(&l));
     return 0;
 }

@@ -227,9 +227,6 @@ static int last_row(const char *dir, const char *const *cols, double *vals, int 
     return rows;
 }
 
-/* The whole pipeline on a small tire and bed: sinkage to the load, travel,
- * summary. The nodal forces the FEM receives balance the DEM's contact totals
- * to round-off, and both sides agree on the interface work. */
 /* A double attribute of wheel.h5's root (the profile). */
 static int wheel_attr(const char *dir, const char *name, double *v)
 {
@@ -249,6 +246,9 @@ static int wheel_attr(const char *dir, const char *name, double *v)
     return bad ? -1 : 0;
 }
 
+/* The whole pipeline on a small tire and bed: sinkage to the load, travel,
+ * summary. The nodal forces the FEM receives balance the DEM's contact totals
+ * to round-off, and both sides agree on the interface work. */
 static int tire_small_runs(void)
 {
     launch l;

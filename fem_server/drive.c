@@ -299,8 +299,9 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, con
     if (d->motion == DRIVE_LOAD_TRAVEL) {
         double W = applied_load(d, time), cdm = d->damping * dt / d->mass;
         vz = (s->velocity[2] + (soil->fz - W) / d->mass * dt + cdm * s->vz_avg) / (1.0 + cdm);
-        if (s->phase == DRIVE_SINK && vz < -drive_sink_speed(d, s))
-            vz = -drive_sink_speed(d, s); /* the rig lowers the wheel no faster than this */
+        const double v_max = drive_sink_speed(d, s);
+        if (s->phase == DRIVE_SINK && vz < -v_max)
+            vz = -v_max; /* the rig lowers the wheel no faster than this */
         if (d->damping_window > 0)
             s->vz_avg += (d->damping_window > dt ? dt / d->damping_window : 1.0) * (vz - s->vz_avg);
     } else if (s->phase == DRIVE_SINK) {

@@ -9,6 +9,8 @@ drive_def drive_def_default(void)
     memset(&d, 0, sizeof d);
     d.radius = 0.272;
     d.sink_velocity = 0.1;
+    d.approach_velocity = 0.1;
+    d.approach_load = 0.5;
     d.target_load = 5000.0;
     d.load_window = 0.005;
     d.max_sink = 0.2;
@@ -49,6 +51,9 @@ int drive_config_read(cm_scene *s, drive_def *d, cm_error *err)
         (rc = cm_scene_double_opt(s, "wheel.start_gap", 0.0, 1.0, d->start_gap, &d->start_gap, err)) ||
         (rc = cm_scene_double(s, "wheel.radius", 1e-3, 10.0, &d->radius, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.sink_velocity", 1e-6, 10.0, d->sink_velocity, &d->sink_velocity, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.approach_velocity", 1e-6, 10.0, d->sink_velocity,
+                                  &d->approach_velocity, err)) ||
+        (rc = cm_scene_double_opt(s, "wheel.approach_load", 1e-3, 1.0, d->approach_load, &d->approach_load, err)) ||
         (rc = cm_scene_double(s, "wheel.target_load", 0.0, 1e7, &d->target_load, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.load_window", 0.0, 10.0, d->load_window, &d->load_window, err)) ||
         (rc = cm_scene_double_opt(s, "wheel.max_sink", 1e-4, 10.0, d->max_sink, &d->max_sink, err)) ||
@@ -212,6 +217,14 @@ static int change_phase(const drive_def *d, drive_state *s, double time, cm_erro
     return CM_OK;
 }
 
+double drive_sink_speed(const drive_def *d, const drive_state *s)
+{
+    double unloaded = 1.0 - s->load_avg / (d->approach_load * d->target_load);
+    if (!(unloaded > 0) || !(d->approach_velocity > d->sink_velocity)) /* also a target load of 0 */
+        return d->sink_velocity;
+    return d->sink_velocity + (d->approach_velocity - d->sink_velocity) * (unloaded < 1.0 ? unloaded : 1.0);
+}
+
 /* x limited to [lo, hi]; counts the exchanges at which a limit acted. */
 static double limit(double x, double lo, double hi, int *hit)
 {
@@ -286,12 +299,13 @@ int drive_update(const drive_def *d, drive_state *s, double time, double dt, con
     if (d->motion == DRIVE_LOAD_TRAVEL) {
         double W = applied_load(d, time), cdm = d->damping * dt / d->mass;
         vz = (s->velocity[2] + (soil->fz - W) / d->mass * dt + cdm * s->vz_avg) / (1.0 + cdm);
-        if (s->phase == DRIVE_SINK && vz < -d->sink_velocity)
-            vz = -d->sink_velocity; /* the rig lowers the wheel no faster than this */
+        const double v_max = drive_sink_speed(d, s);
+        if (s->phase == DRIVE_SINK && vz < -v_max)
+            vz = -v_max; /* the rig lowers the wheel no faster than this */
         if (d->damping_window > 0)
             s->vz_avg += (d->damping_window > dt ? dt / d->damping_window : 1.0) * (vz - s->vz_avg);
     } else if (s->phase == DRIVE_SINK) {
-        vz = -d->sink_velocity;
+        vz = -drive_sink_speed(d, s);
     }
     if (s->phase == DRIVE_TRAVEL) {
         s->velocity[1] = 0.0;

@@ -9,7 +9,8 @@
  * damper, which takes the heave out of the free wheel; u the wheel's mean
  * sinking speed, so that the damper does not carry load while the wheel
  * sinks steadily), lowered no faster than
- * sink_velocity (a test rig sets the wheel down); once the contact force
+ * sink_velocity (a test rig sets the wheel down; faster while the wheel
+ * carries little load with wheel.approach_velocity); once the contact force
  * carries the load, the wheel travels at the prescribed slip, still free to
  * sink or rise under the same load.
  *
@@ -77,6 +78,10 @@ typedef struct drive_def {
                                 surface reported by the DEM before sinking; 0 = keep centre */
     double radius;           /* m, rolling radius R_T used for slip (tire outer radius) */
     double sink_velocity;    /* m/s, downward speed in the sinkage phase (table 1: 0.1) */
+    double approach_velocity; /* m/s: the rig's lowering speed while the wheel carries no load,
+                                falling linearly with the averaged load to sink_velocity at
+                                approach_load (drive_sink_speed); <= sink_velocity (default): off */
+    double approach_load;    /* (0, 1]: the fraction of target_load at which the approach ends */
     double target_load;      /* N, vertical contact force that ends the sinkage phase */
     double load_window;      /* s, time constant of the moving average of the load that
                                 is compared with target_load (DEM forces are noisy) */
@@ -160,6 +165,17 @@ double drive_slip(double omega, double radius, double v);
 double drive_prescribed_slip(const drive_def *d, double travelled);
 /* The slip of the motion held for the next interval (0 outside the travel). */
 double drive_realised_slip(const drive_def *d, const drive_state *s);
+
+/* The rig's lowering speed limit in the sinkage phase, m/s (> 0): a rig sets
+ * a wheel down quickly and slows as it takes the load,
+ *   v = sink_velocity + (approach_velocity - sink_velocity) max(0, 1 - L / (approach_load W)),
+ * L the averaged contact force, W the target load. Without load the wheel
+ * comes down at approach_velocity; from approach_load W on, at
+ * sink_velocity, as the paper's rig (table 1); never below sink_velocity
+ * (an approach_velocity at or below it is no approach). A function of the
+ * state, not a switch, so a noisy load only modulates the speed and a
+ * checkpoint needs nothing more. */
+double drive_sink_speed(const drive_def *d, const drive_state *s);
 
 /* Advances the kinematic state by dt at the motion held during the last
  * interval, then decides the motion for the next one from the soil's force

@@ -282,6 +282,13 @@ static int run(const options *o)
                     drive.motion == DRIVE_LOAD_TRAVEL ? "load_travel" : "sink_travel",
                     k_control_names[drive.control], used, mesh_mass, mesh_inertia);
     }
+    if (drive.motion != DRIVE_HOLD) {
+        if (drive.approach_velocity > drive.sink_velocity)
+            cm_log_info("wheel: set down at up to %g m/s while unloaded, slowing to %g m/s at %.0f %% of the load",
+                        drive.approach_velocity, drive.sink_velocity, 100 * drive.approach_load);
+        else
+            cm_log_info("wheel: set down at up to %g m/s", drive.sink_velocity);
+    }
     if (drive.motion == DRIVE_LOAD_TRAVEL)
         cm_log_info("wheel: vertical damper %.4g N s/m (%.2f of critical on the reference soil stiffness %.3g N/m)",
                     drive.damping, drive.damping / (2.0 * sqrt(DRIVE_SOIL_STIFFNESS_REF * drive.mass)),

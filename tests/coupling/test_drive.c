@@ -77,6 +77,89 @@ static int phases(void)
     return 0;
 }
 
+/* The approach: fast while the wheel carries nothing, slowing linearly with
+ * the load to sink_velocity at approach_load W. On soil whose force grows
+ * linearly with the sinkage, F = k z, the speed law z' = v_a - (v_a - v_s) z / z_h
+ * (z_h = approach_load W / k) integrates in closed form to
+ * z = z_inf (1 - exp(-t / tau)), tau = z_h / (v_a - v_s), z_inf = v_a tau,
+ * so z_h is reached at t_h = -tau ln(1 - z_h / z_inf); the rest at v_s. */
+static int approach_speed(void)
+{
+    const double va = 0.5, vs = 0.1, W = 400.0, zW = 0.02; /* the load W at 20 mm */
+    drive_def d = drive_def_default();
+    d.center[2] = 0.5;
+    d.sink_velocity = vs;
+    d.approach_velocity = va;
+    d.approach_load = 0.5;
+    d.target_load = W;
+    d.load_window = 0.0;
+    d.travel_distance = 0.01;
+    drive_state s;
+    drive_start(&d, &s);
+    cm_error err = {0};
+    const double dt = 1e-6, zh = d.approach_load * zW;
+    double t = 0, load = 0, v_first = 0, v_last = 0, worst = 0;
+    long k = 0;
+    for (; s.phase == DRIVE_SINK && k < 1000000; k++) {
+        t += dt;
+        ENSURE(vertical_update(&d, &s, t, dt, load, &err) == CM_OK);
+        if (k == 0)
+            v_first = -s.velocity[2];
+        if (s.phase == DRIVE_SINK) {
+            v_last = -s.velocity[2];
+            /* the speed law at the state's own load, within [v_s, v_a] */
+            double expect = vs + (va - vs) * fmax(0.0, 1.0 - s.load_avg / (0.5 * W));
+            worst = fmax(worst, fabs(-s.velocity[2] - expect));
+            ENSURE(-s.velocity[2] <= va && -s.velocity[2] >= vs);
+        }
+        load = W * s.sunk / zW;
+    }
+    double tau = zh / (va - vs), zinf = va * tau;
+    double t_expect = -tau * log(1.0 - zh / zinf) + (zW - zh) / vs;
+    printf("  load reached after %.5f s (closed form %.5f s; at sink_velocity alone %.3f s); speed %.3f then %.3f "
+           "m/s\n", t, t_expect, zW / vs, v_first, v_last);
+    ENSURE(s.phase == DRIVE_TRAVEL);
+    ENSURE(v_first == va && v_last == vs && worst < 1e-15);
+    ENSURE_NEAR(t, t_expect, 2e-5 * t_expect + 2 * dt);
+
+    /* Under load control the free wheel accelerates under the load but is
+     * lowered no faster than the approach speed while it carries nothing. */
+    d.motion = DRIVE_LOAD_TRAVEL;
+    d.mass = 20.0;
+    d.damping = 0.0;
+    d.load_ramp = 0.0;
+    drive_start(&d, &s);
+    double vmax = 0;
+    for (k = 0, t = 0; k < 200000; k++) {
+        t += dt;
+        ENSURE(vertical_update(&d, &s, t, dt, 0.0, &err) == CM_OK);
+        vmax = fmax(vmax, -s.velocity[2]);
+    }
+    ENSURE(s.phase == DRIVE_SINK && vmax == va);
+
+    /* The scene keys: off by default (approach_velocity = sink_velocity), and
+     * an approach slower than the sinkage is none (a study varying
+     * sink_velocity alone keeps its base's approach). */
+    cm_scene *sc;
+    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                                "sink_velocity = 0.2; };",
+                                "approach.cfg", &sc, &err) == CM_OK);
+    drive_def r = drive_def_default();
+    int rc = drive_config_read(sc, &r, &err);
+    cm_scene_close(&sc);
+    ENSURE_MSG(rc == CM_OK && r.approach_velocity == 0.2, "%s", err.msg);
+    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                                "sink_velocity = 0.2; approach_velocity = 0.1; };",
+                                "approach.cfg", &sc, &err) == CM_OK);
+    r = drive_def_default();
+    rc = drive_config_read(sc, &r, &err);
+    cm_scene_close(&sc);
+    ENSURE_MSG(rc == CM_OK, "%s", err.msg);
+    drive_start(&r, &s);
+    ENSURE(drive_sink_speed(&r, &s) == 0.2);
+    return 0;
+}
+
 /* One spike above the target does not end the sinkage: the averaged load must
  * reach it. */
 static int load_spike_ignored(void)
@@ -571,6 +654,7 @@ static int steady_detection_and_coverage(void)
 static const test_case tests[] = {
     {"slip_definitions", slip_definitions},
     {"phases", phases},
+    {"approach_speed", approach_speed},
     {"load_spike_ignored", load_spike_ignored},
     {"load_mode_settles_and_travels", load_mode_settles_and_travels},
     {"fixed_wheel_stays", fixed_wheel_stays},

@@ -431,6 +431,8 @@ static void scene_seed(fz_rng *r, fz_buf *b, toks *tk)
             kv_num(&g, in, "start_gap", "%g", 0.005);
         if (chance(r, 50))
             kv_num(&g, in, "sink_velocity", "%g", 0.1);
+        if (chance(r, 30))
+            kv_num(&g, in, "approach_velocity", "%g", 0.5);
         kv_num(&g, in, "target_load", "%g", 1500.0);
         if (chance(r, 40))
             kv_num(&g, in, "max_sink", "%g", 0.2);

@@ -122,11 +122,18 @@ def plan_shares_beds():
     ensure(base[2].endswith(os.path.join("base", "seed%d" % seeds[0])), base[2])
     # coarser grains: a bed of their own
     ensure(bed_of("grain_scale=1.25", seeds[0])[0] != base[0], "grain_scale shares the bed")
-    # every setting runs on every bed; the reference and the base on the noise beds too
-    extra = st.get("noise_seeds", [])
-    ensure(len(runs) == len(S.plan(st)) * len(seeds) + 2 * len(extra), len(runs))
-    ensure(len([r for r in runs if r[0] == "reference"]) == len(seeds) + len(extra), "reference beds")
+    # every setting runs on every bed; the reference, the base and the other noise_runs on the noise beds too
+    extra, noise_runs = st.get("noise_seeds", []), st["noise_runs"]
+    ensure(len(runs) == len(S.plan(st)) * len(seeds) + len(noise_runs) * len(extra), len(runs))
+    for rid in noise_runs:
+        ensure(len([r for r in runs if r[0] == rid]) == len(seeds) + len(extra), "%s's beds" % rid)
     ensure(len([r for r in runs if r[0] == "grain_scale=1.25"]) == len(seeds), "a knob's beds")
+    # a noise run the plan does not have is refused, not silently left out
+    try:
+        S.expand_seeds(S.plan(st), dict(st, noise_runs=["reference", "approach=9"]), tempfile.mkdtemp())
+        ensure(False, "an unknown noise run accepted")
+    except SystemExit as e:
+        ensure("approach=9" in str(e), str(e))
     ensure(st["set"].get("dem.bed.settle_dt"), "the study settles every bed with one step")
 
 

@@ -219,8 +219,10 @@ static int change_phase(const drive_def *d, drive_state *s, double time, cm_erro
 
 double drive_sink_speed(const drive_def *d, const drive_state *s)
 {
+    if (!(d->approach_velocity > d->sink_velocity)) /* no approach */
+        return d->sink_velocity;
     double unloaded = 1.0 - s->load_avg / (d->approach_load * d->target_load);
-    if (!(unloaded > 0) || !(d->approach_velocity > d->sink_velocity)) /* also a target load of 0 */
+    if (!(unloaded > 0)) /* also a target load of 0 */
         return d->sink_velocity;
     return d->sink_velocity + (d->approach_velocity - d->sink_velocity) * (unloaded < 1.0 ? unloaded : 1.0);
 }

@@ -15,6 +15,21 @@ static int vertical_update(const drive_def *d, drive_state *s, double t, double 
     return drive_update(d, s, t, dt, &soil, err);
 }
 
+/* The wheel section of a scene text read as fem_server reads it: r from
+ * drive_def_default, the reader's status (a text that does not parse fails
+ * too, with its own message). */
+static int read_wheel(const char *text, drive_def *r, cm_error *err)
+{
+    cm_scene *sc;
+    *r = drive_def_default();
+    int rc = cm_scene_open_string(text, "wheel.cfg", &sc, err);
+    if (rc)
+        return rc;
+    rc = drive_config_read(sc, r, err);
+    cm_scene_close(&sc);
+    return rc;
+}
+
 /* Driving and braking slip round-trip through v, and stay within [-1, 1]. */
 static int slip_definitions(void)
 {
@@ -140,20 +155,14 @@ static int approach_speed(void)
     /* The scene keys: off by default (approach_velocity = sink_velocity), and
      * an approach slower than the sinkage is none (a study varying
      * sink_velocity alone keeps its base's approach). */
-    cm_scene *sc;
-    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
-                                "sink_velocity = 0.2; };",
-                                "approach.cfg", &sc, &err) == CM_OK);
-    drive_def r = drive_def_default();
-    int rc = drive_config_read(sc, &r, &err);
-    cm_scene_close(&sc);
+    drive_def r;
+    int rc = read_wheel("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                        "sink_velocity = 0.2; };",
+                        &r, &err);
     ENSURE_MSG(rc == CM_OK && r.approach_velocity == 0.2, "%s", err.msg);
-    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
-                                "sink_velocity = 0.2; approach_velocity = 0.1; };",
-                                "approach.cfg", &sc, &err) == CM_OK);
-    r = drive_def_default();
-    rc = drive_config_read(sc, &r, &err);
-    cm_scene_close(&sc);
+    rc = read_wheel("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                    "sink_velocity = 0.2; approach_velocity = 0.1; };",
+                    &r, &err);
     ENSURE_MSG(rc == CM_OK, "%s", err.msg);
     drive_start(&r, &s);
     ENSURE(drive_sink_speed(&r, &s) == 0.2);
@@ -453,20 +462,14 @@ static int slip_ramp_lag(void)
     ENSURE(worst_lag < 0.02 * K * L * g);
 
     /* the scene keys: a ramp needs a travel length */
-    cm_scene *sc;
-    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
-                                "slip = 0.0; slip_end = 0.4; travel_distance = 0.0; };",
-                                "ramp.cfg", &sc, &err) == CM_OK);
-    drive_def r = drive_def_default();
-    int rc = drive_config_read(sc, &r, &err);
-    cm_scene_close(&sc);
+    drive_def r;
+    int rc = read_wheel("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                        "slip = 0.0; slip_end = 0.4; travel_distance = 0.0; };",
+                        &r, &err);
     ENSURE_MSG(rc != CM_OK && strstr(err.msg, "wheel.slip_end"), "a ramp without travel accepted (%s)", err.msg);
-    ENSURE(cm_scene_open_string("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
-                                "slip = 0.0; slip_end = 0.4; travel_distance = 0.5; };",
-                                "ramp.cfg", &sc, &err) == CM_OK);
-    r = drive_def_default();
-    rc = drive_config_read(sc, &r, &err);
-    cm_scene_close(&sc);
+    rc = read_wheel("wheel = { center = [0.0, 0.0, 1.0]; radius = 0.3; target_load = 100.0; "
+                    "slip = 0.0; slip_end = 0.4; travel_distance = 0.5; };",
+                    &r, &err);
     ENSURE_MSG(rc == CM_OK && r.slip_ramp && r.slip_end == 0.4, "%s", err.msg);
     ENSURE_NEAR(drive_prescribed_slip(&r, 0.25), 0.2, 1e-15);
     return 0;

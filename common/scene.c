@@ -740,8 +740,9 @@ void cm_scene_clear_overrides(void) { g_n_overrides = 0; }
 uint64_t cm_scene_overrides_hash(uint64_t h)
 {
     /* settings that cannot change a result stay out: a run may be resumed
-     * with another DEM thread count (the same bits for any, see dem_pairs.c) */
-    static const char *const neutral[] = {"dem.threads"};
+     * with another DEM thread count or MPI layout (the same bits for any,
+     * see dem_pairs.c and dem_mpi.h) */
+    static const char *const neutral[] = {"dem.threads", "dem.ranks", "dem.balance"};
     for (int i = 0; i < g_n_overrides; i++) {
         int skip = 0;
         for (size_t k = 0; k < sizeof neutral / sizeof *neutral; k++) {

@@ -281,6 +281,7 @@ typedef struct dem_profile {
     double halo;      /* s, distributed run: ghosts refreshed and the rebuild decision agreed by every rank */
     double migrate;   /* s, distributed run: slabs, grains to their new ranks, fresh ghosts (part of rebuild) */
     double surf_gather; /* s, distributed run: the ranks' surface contacts gathered and summed on rank 0 (part of surface) */
+    double idle;      /* s, outside the step: the coupled loop waiting for fem_server's reply or (other ranks) rank 0's */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */
     long surface_lists; /* rebuilds of the grains' triangle lists (the tree walked instead of the lists) */
@@ -307,6 +308,8 @@ typedef struct dem_stats {
 } dem_stats;
 
 void dem_world_stats(const dem_world *w, dem_stats *s);
+/* Adds to the profile's idle time (the coupled loop's waits outside the step). */
+void dem_world_add_idle(dem_world *w, double seconds);
 /* Steps taken so far (cheap; dem_world_stats sums over every grain and pair). */
 long dem_world_steps(const dem_world *w);
 /* Total force on wall k from the last step (the grains push it), N. */

@@ -225,7 +225,8 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
     static const char *const damping_words[] = {"calibrated", "ln_e", NULL};
     static const char *const rolling_words[] = {"constant_torque", "spring", NULL}; /* enum dem_rolling_model */
     static const double g_def[3] = {0.0, 0.0, -9.81};
-    long threads = 1, max_grains = 0, reorder = d->reorder_every;
+    static const char *const balance_words[] = {"grains", "time", NULL}; /* DEM_BALANCE_* */
+    long threads = 1, ranks = 1, max_grains = 0, reorder = d->reorder_every;
     int rc;
     /* The step is the coupling's (both servers read coupling.dt); dem.dt is
      * for DEM-only scenes without a coupling section. */
@@ -233,6 +234,8 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
     if ((rc = cm_scene_double(s, dt_key, 1e-12, 1.0, &d->dt, err)) ||
         (rc = cm_scene_doubles_opt(s, "dem.gravity", 3, -1e4, 1e4, g_def, d->gravity, err)) ||
         (rc = cm_scene_int_opt(s, "dem.threads", 0, 1024, 1, &threads, err)) ||
+        (rc = cm_scene_int_opt(s, "dem.ranks", 1, 65536, 1, &ranks, err)) ||
+        (rc = cm_scene_choice_opt(s, "dem.balance", balance_words, DEM_BALANCE_GRAINS, &c->balance, err)) ||
         (rc = cm_scene_choice_opt(s, "dem.damping", damping_words, DEM_DAMPING_CALIBRATED, &d->damping, err)) ||
         (rc = cm_scene_choice_opt(s, "dem.rolling_model", rolling_words, DEM_ROLLING_CONSTANT_TORQUE,
                                   &d->rolling_model, err)) ||
@@ -248,6 +251,7 @@ int dem_config_read(cm_scene *s, dem_config *c, cm_error *err)
         (rc = cm_scene_int_opt(s, "dem.reorder_every", 0, 1000000L, reorder, &reorder, err)))
         return rc;
     d->threads = (int)threads;
+    c->ranks = (int)ranks;
     d->reorder_every = (int)reorder;
     if ((rc = read_materials(s, c, err)) || (rc = read_walls(s, c, err)))
         return rc;

@@ -43,7 +43,12 @@ typedef struct dem_config {
     int output_every;      /* steps between grain frames */
     int series_every;      /* steps between time-series lines */
     dem_window_def window;
+    /* MPI (dem_server/README.md, "MPI"): neither changes a result */
+    int ranks;             /* dem.ranks: the ranks ./run starts dem_server on (its --ranks wins) */
+    int balance;           /* dem.balance: DEM_BALANCE_GRAINS or DEM_BALANCE_TIME (how slabs are chosen) */
 } dem_config;
+
+enum { DEM_BALANCE_GRAINS = 0, DEM_BALANCE_TIME = 1 }; /* dem.balance's words, in order */
 
 /* Reads the `dem = { ... }` section (only that one) of a scene. */
 int dem_config_read(cm_scene *s, dem_config *c, cm_error *err);

@@ -328,6 +328,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         goto done;
     const long n_first = n;
     dem_coupled_profile prof = {0};
+    long grains = 0; /* every rank's, for the progress line */
     double t_lap = cm_now();
     for (;; n++) {
         int finish = stop_requested || time >= def->end_time - 0.5 * def->dt;
@@ -343,6 +344,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         lap(&t_lap, &prof.grains);
 
         reply in = {0};
+        const double idle0 = prof.wait + prof.bcast;
         if (root) {
             const ipc_frame_head *head;
             const double *q;
@@ -369,6 +371,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if (dist)
             prof.bcast_bytes += (double)(sizeof in + (in.kind == IPC_FRAME_DATA ? 2 * m * sizeof *c.x : 0));
         lap(&t_lap, &prof.bcast);
+        dem_world_add_idle(w, prof.wait + prof.bcast - idle0); /* what the time balance leaves out (dem_mpi.c) */
         const uint32_t kind = (uint32_t)in.kind, flags = (uint32_t)in.flags;
         stop_requested = in.stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)
@@ -397,14 +400,17 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
          * ranks is the one process's), a failing one stops them all */
         if (n % 100 == 0 && (rc = check_health(w, def, err)))
             goto done;
+        /* the grains of every rank for the progress line, as often as the check */
+        if (n % 100 == 0 && (rc = dist ? dist->grains(w, &grains, dist->user, err) : CM_OK))
+            goto done;
         double now = cm_now();
         if (root && def->progress_every > 0 && now - last_progress >= def->progress_every) {
             last_progress = now;
-            dem_stats st;
-            dem_world_stats(w, &st);
+            if (!dist)
+                grains = dem_grain_count(w);
             double steps = (double)(n + 1 - n_first) * k_steps;
-            cm_log_info("t = %.4f s  %.0f steps/s (%.2f M grain-steps/s)  grains %d  surface contacts %.0f", time,
-                        steps / (now - t_start), 1e-6 * steps * st.grains / (now - t_start), st.grains,
+            cm_log_info("t = %.4f s  %.0f steps/s (%.2f M grain-steps/s)  grains %ld  surface contacts %.0f", time,
+                        steps / (now - t_start), 1e-6 * steps * (double)grains / (now - t_start), grains,
                         acc.contacts / (double)k_steps);
         }
         lap(&t_lap, &prof.record);

@@ -42,6 +42,8 @@ typedef struct dem_coupled_dist {
     int (*collect)(dem_world *w, void *user, cm_error *err);
     int (*rejoin)(dem_world *w, void *user, cm_error *err);
     int (*agree_rebuild)(dem_world *w, void *user, cm_error *err);
+    /* the grains owned by all ranks, on every rank (collective) */
+    int (*grains)(dem_world *w, long *grains, void *user, cm_error *err);
     void *user;
 } dem_coupled_dist;
 

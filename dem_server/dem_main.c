@@ -82,6 +82,17 @@ static void ensure_passive_waiting(const options *o, int threads)
 static int g_rank = 0, g_ranks = 1;
 #ifdef DEMFEM_MPI
 static MPI_Comm g_comm = MPI_COMM_NULL;
+static int g_balance = DEM_BALANCE_GRAINS; /* dem.balance */
+
+/* Spreads the world over the ranks with the scene's balance. */
+static int attach(dem_world *w, cm_error *err)
+{
+    int rc = dem_mpi_attach(w, g_comm, err);
+    if (rc)
+        return rc;
+    const int b = g_balance == DEM_BALANCE_TIME ? DEM_MPI_BALANCE_TIME : DEM_MPI_BALANCE_GRAINS;
+    return dem_mpi_set_balance(w, b) ? cm_fail(err, CM_ERR_STATE, "dem.balance: cannot set it") : CM_OK;
+}
 #endif
 
 static int mpi_start(cm_error *err)
@@ -238,7 +249,18 @@ static int coupled_attach(dem_world *w, void *user, cm_error *err)
     if (rc != MPI_SUCCESS)
         return cm_fail(err, CM_ERR_IO, "MPI broadcast of the output positions failed");
     c->last_frame = last[0], c->last_series = last[1];
-    return dem_mpi_attach(w, g_comm, err);
+    return attach(w, err);
+}
+
+static int coupled_grains(dem_world *w, long *grains, void *user, cm_error *err)
+{
+    (void)user;
+    dem_mpi_stats s;
+    dem_mpi_stats_get(w, &s);
+    long mine = s.owned;
+    if (MPI_Allreduce(&mine, grains, 1, MPI_LONG, MPI_SUM, g_comm) != MPI_SUCCESS)
+        return cm_fail(err, CM_ERR_IO, "MPI allreduce of the grain counts failed");
+    return CM_OK;
 }
 
 static int coupled_hash(dem_world *w, uint64_t *hash, void *user, cm_error *err)
@@ -476,6 +498,12 @@ static int run(const options *o)
     ensure_passive_waiting(o, cfg.world.threads);
     if ((rc = mpi_start(&err))) /* after the re-execution above */
         goto fail;
+#ifdef DEMFEM_MPI
+    g_balance = cfg.balance;
+#endif
+    if (g_rank == 0 && g_ranks > 1)
+        cm_log_info("%d MPI ranks (the scene's dem.ranks: %d), slabs balanced by %s", g_ranks, cfg.ranks,
+                    cfg.balance == DEM_BALANCE_TIME ? "measured busy time" : "grain count");
     if (o->out)
         snprintf(cfg.output_dir, sizeof cfg.output_dir, "%s", o->out);
     cfg.world.max_grains += cm_scene_length(scene, "dem.grains");
@@ -581,7 +609,7 @@ static int run(const options *o)
         double last = cm_now();
 #ifdef DEMFEM_MPI
         if (g_ranks > 1) {
-            if ((rc = dem_mpi_attach(w, g_comm, &err)))
+            if ((rc = attach(w, &err)))
                 goto fail;
             octx.last_frame = octx.last_series = dem_world_steps(w); /* rank 0's clock, now every rank's */
             octx.distributed = 1;
@@ -618,6 +646,7 @@ static int run(const options *o)
         const dem_coupled_dist dist = {.rank = g_rank, .ranks = g_ranks, .bcast = coupled_bcast,
                                        .attach = coupled_attach, .hash = coupled_hash, .collect = coupled_collect,
                                        .rejoin = coupled_rejoin, .agree_rebuild = coupled_agree_rebuild,
+                                       .grains = coupled_grains,
                                        .user = &octx};
         if (g_ranks > 1) {
             def.dist = &dist;

@@ -31,7 +31,14 @@ typedef struct dist_ctx {
     int distributed;           /* 0 until the first rebuild spread rank 0's grains */
     long scattered, migrated, springs_sent;
     int *bounds;               /* size + 1 */
-    long *cols, cols_cap;      /* grain counts per cell column (global after the allreduce) */
+    long *cols, cols_cap;      /* grain weights per cell column (global after the allreduce) */
+    /* the balance (dem_mpi_set_balance): by grains, or by each rank's
+     * measured busy time per grain-step since the previous rebuild */
+    int balance;
+    double cost;               /* busy s per owned grain-step here, smoothed; 0 before the first measure */
+    double *costs;             /* size: every rank's cost */
+    double wall_mark, wait_mark; /* at the previous rebuild: the clock, the waits (busy_waits) */
+    long steps_mark, own_mark; /* steps then, grains owned since */
     int *dest;                 /* per slot: rank of the grain's new slab (owned grains) */
     int *scount, *sdispl, *rcount, *rdispl; /* size each, alltoallv */
     int *hcount, *hdispl, *hrcount, *hrdispl;
@@ -191,6 +198,49 @@ int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_erro
     return CM_OK;
 }
 
+/* What a rank spends waiting for the others (halo, the rebuild's
+ * migration and agreements, the surface gather) or, coupled, for
+ * fem_server or rank 0's reply: the clock minus these is its busy time. */
+static double busy_waits(const dem_profile *p) { return p->halo + p->migrate + p->surf_gather + p->idle; }
+
+/* The time balance (LAMMPS' "fix balance ... weight time" in spirit): one
+ * of this rank's grains weighs its busy seconds per grain-step since the
+ * previous rebuild (the clock minus busy_waits: its grains' stages, and on
+ * rank 0 also the exchange's own work), averaged over rebuilds, relative
+ * to the slowest rank's. A rank that shares its core (with fem_server,
+ * say), holds the tire's contacts or does rank 0's serial work measures
+ * more per grain and gets fewer. Weights are integers (1..1024), so the
+ * column sums are exact and the bounds the same on every rank; which rank
+ * owns a grain never changes a result (dem_mpi.h). Every grain weighs 1
+ * until each rank has a measure. */
+static int grain_weight(dem_world *w, dist_ctx *d, long *weight, cm_error *err)
+{
+    *weight = 1;
+    if (d->balance != DEM_MPI_BALANCE_TIME)
+        return CM_OK;
+    const double now = cm_now(), waits = busy_waits(&w->prof);
+    const long steps = w->prof.steps - d->steps_mark;
+    if (d->distributed && steps > 0 && d->own_mark > 0) {
+        const double c = ((now - d->wall_mark) - (waits - d->wait_mark)) / ((double)steps * (double)d->own_mark);
+        if (isfinite(c) && c > 0.0)
+            d->cost = d->cost > 0.0 ? 0.75 * d->cost + 0.25 * c : c;
+    }
+    d->wall_mark = now, d->wait_mark = waits, d->steps_mark = w->prof.steps;
+    int rc = MPI_Allgather(&d->cost, 1, MPI_DOUBLE, d->costs, 1, MPI_DOUBLE, d->comm);
+    if (rc != MPI_SUCCESS)
+        return mpi_fail(err, rc, "allgather of the ranks' costs", w->step);
+    double hi = 0.0;
+    for (int r = 0; r < d->size; r++) {
+        if (!(d->costs[r] > 0.0))
+            return CM_OK;
+        hi = fmax(hi, d->costs[r]);
+    }
+    *weight = lround(1024.0 * d->cost / hi);
+    if (*weight < 1)
+        *weight = 1;
+    return CM_OK;
+}
+
 static int rank_of_col(const dist_ctx *d, int col)
 {
     int lo = 0, hi = d->size - 1; /* bounds[lo] <= col < bounds[hi + 1] */
@@ -243,11 +293,14 @@ static int dist_rebuild(dem_world *w, cm_error *err)
             return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for %d cell columns", w->step, n_cols);
         d->cols = c, d->cols_cap = n_cols;
     }
+    long weight;
+    if ((rc = grain_weight(w, d, &weight, err)))
+        return rc;
     memset(d->cols, 0, (size_t)n_cols * sizeof *d->cols);
     for (int i = own_lo; i < own_hi; i++) {
         int c = dem_grid_column(gd, g->x[i]);
         d->dest[i] = c; /* the column for now */
-        d->cols[c]++;
+        d->cols[c] += weight;
     }
     if ((rc = MPI_Allreduce(MPI_IN_PLACE, d->cols, n_cols, MPI_LONG, MPI_SUM, d->comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "allreduce of the column counts", w->step);
@@ -400,6 +453,7 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     }
     w->own_lo = n_ghost[0];
     w->own_hi = g->n - n_ghost[1];
+    d->own_mark = w->own_hi - w->own_lo;
     w->hist_extra = &d->extra;
     w->hist_extra_val = d->extra_val;
     const double t1 = cm_now();
@@ -543,6 +597,7 @@ static void ctx_free(dist_ctx *d)
     if (!d)
         return;
     free(d->bounds);
+    free(d->costs);
     free(d->cols);
     free(d->dest);
     free(d->scount);
@@ -607,10 +662,11 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory");
     d->comm = comm, d->rank = rank, d->size = size;
     d->bounds = calloc((size_t)size + 1, sizeof *d->bounds);
+    d->costs = calloc((size_t)size, sizeof *d->costs);
     d->scount = calloc(9 * (size_t)size, sizeof *d->scount);
     d->dest = calloc((size_t)w->g.cap, sizeof *d->dest);
     d->order = calloc((size_t)w->g.cap, sizeof *d->order);
-    if (!d->bounds || !d->scount || !d->dest || !d->order) {
+    if (!d->bounds || !d->costs || !d->scount || !d->dest || !d->order) {
         ctx_free(d);
         return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory");
     }
@@ -628,6 +684,15 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
     w->dist = &dist_ops;
     w->dist_ctx = d;
     w->own_lo = 0, w->own_hi = w->g.n; /* all on rank 0 until the first rebuild */
+    return CM_OK;
+}
+
+int dem_mpi_set_balance(dem_world *w, int balance)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!w->dist || (balance != DEM_MPI_BALANCE_GRAINS && balance != DEM_MPI_BALANCE_TIME))
+        return CM_ERR_STATE;
+    d->balance = balance;
     return CM_OK;
 }
 

@@ -35,6 +35,20 @@
  * until then, as a world of its own would: attaching changes no bits).
  * Needs reorder_every = 1. */
 int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err);
+/* How the slabs are chosen at each neighbour rebuild (after attach; the
+ * same bits either way, only the rank that owns a grain changes):
+ *   GRAINS  even grain counts (the default)
+ *   TIME    even measured busy time: a grain weighs its rank's busy
+ *           seconds (the clock less its waits for the other ranks and,
+ *           coupled, for fem_server) per grain-step since the previous
+ *           rebuild, relative to the slowest rank's (smoothed over
+ *           rebuilds); for ranks that share cores with other work
+ *           (fem_server) or that hold the tire's contacts, whose grains
+ *           cost more.
+ * CM_ERR_STATE for a world not attached or an unknown mode. */
+enum { DEM_MPI_BALANCE_GRAINS = 0, DEM_MPI_BALANCE_TIME = 1 };
+int dem_mpi_set_balance(dem_world *w, int balance);
+
 /* Frees the distribution (the world keeps this rank's grains and is no
  * longer stepped in step with the others); dem_world_destroy does it too. */
 void dem_mpi_detach(dem_world *w);
@@ -93,8 +107,8 @@ int dem_mpi_agree_rebuild(dem_world *w, cm_error *err);
 int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err);
 
 /* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
- * each at least one column, split so that the grain counts count[c] are as
- * even as whole columns allow (rank r's slab starts at the first column
+ * each at least one column, split so that the grain counts (or weights)
+ * count[c] are as even as whole columns allow (rank r's slab starts at the first column
  * where the running count reaches r/ranks of the total). CM_ERR_RANGE when
  * there are fewer columns than ranks. */
 int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err);

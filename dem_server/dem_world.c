@@ -749,6 +749,8 @@ void dem_surface_totals(const dem_world *w, dem_surface_total *t)
 
 /* ---- diagnostics ------------------------------------------------------- */
 
+void dem_world_add_idle(dem_world *w, double seconds) { w->prof.idle += seconds; }
+
 long dem_world_steps(const dem_world *w) { return w->step; }
 
 void dem_world_stats(const dem_world *w, dem_stats *s)

@@ -4,7 +4,10 @@
 # that removes grains behind, appends a stretch in front and freezes and
 # thaws grains as the wheel travels) for END s, run through ./run by one
 # plain dem_server and by `./run --ranks 2` and `--ranks 3` (oversubscribed
-# next to fem_server on two cores). Every run must end in the same
+# next to fem_server on two cores), and by the scene asking for 2 ranks with
+# slabs balanced by measured time (dem.ranks = 2, dem.balance = "time": on
+# two cores ./run binds the ranks and fem_server; dem_profile_ranks.csv must
+# then have two ranks' rows). Every run must end in the same
 # dem_world_hash and fem_state_hash and write the same result files:
 # traction.csv, summary.json, fem_series.csv, dem_series.csv (energies
 # summed over the grains gathered on rank 0, the ranks' contact counts
@@ -32,22 +35,29 @@ run() { # NAME [--ranks N]
 run one
 read -r dem1 fem1 < "$work/one.hash"
 echo "one process: dem_world_hash $dem1, fem_state_hash $fem1"
-for n in 2 3; do
-  run ranks$n --ranks $n
-  read -r dem fem < "$work/ranks$n.hash"
-  grep -h 'rank .* of' "$work/ranks$n.log"
-  echo "$n ranks: dem_world_hash $dem, fem_state_hash $fem"
-  [ "$dem" = "$dem1" ] || { echo "$n ranks: the DEM's final state differs"; exit 1; }
-  [ "$fem" = "$fem1" ] || { echo "$n ranks: the FEM's final state differs"; exit 1; }
-  moved=$(sed -n 's/.*rank [0-9]* of [0-9]*:.*, \([0-9]*\) migrated;.*/\1/p' "$work/ranks$n.log" |
+# NAME RANKS ARGS...: the distributed runs
+cases=("ranks2 2 --ranks 2" "ranks3 3 --ranks 3" "scene2 2 --set dem.ranks=2 --set dem.balance=time")
+for c in "${cases[@]}"; do
+  read -r name n args <<< "$c"
+  # shellcheck disable=SC2086 # the case's arguments, split on purpose
+  run "$name" $args
+  read -r dem fem < "$work/$name.hash"
+  grep -h 'rank .* of' "$work/$name.log"
+  echo "$name ($n ranks): dem_world_hash $dem, fem_state_hash $fem"
+  [ "$dem" = "$dem1" ] || { echo "$name: the DEM's final state differs"; exit 1; }
+  [ "$fem" = "$fem1" ] || { echo "$name: the FEM's final state differs"; exit 1; }
+  rows=$(tail -n +2 "$work/$name/dem_profile_ranks.csv" | wc -l)
+  [ "$rows" -eq "$n" ] || { echo "$name: dem_profile_ranks.csv has $rows ranks, want $n"; exit 1; }
+  moved=$(sed -n 's/.*rank [0-9]* of [0-9]*:.*, \([0-9]*\) migrated;.*/\1/p' "$work/$name.log" |
           awk '{s += $1} END {print s + 0}')
-  [ "$moved" -gt 0 ] || { echo "$n ranks: no grain migrated between ranks"; exit 1; }
-  touching=$(sed -n 's/.*rank [0-9]* of [0-9]*: \([0-9]*\) surface contacts over.*/\1/p' "$work/ranks$n.log" |
+  [ "$moved" -gt 0 ] || { echo "$name: no grain migrated between ranks"; exit 1; }
+  touching=$(sed -n 's/.*rank [0-9]* of [0-9]*: \([0-9]*\) surface contacts over.*/\1/p' "$work/$name.log" |
              awk '$1 > 0 {k++} END {print k + 0}')
-  [ "$touching" -gt 1 ] || { echo "$n ranks: surface contacts on $touching rank(s), want more than one"; exit 1; }
-  shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/ranks$n.log")
-  grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/ranks$n.log" &&
-    [ "${shifts:-0}" -gt 0 ] || { echo "$n ranks: the window did not shift while distributed"; exit 1; }
-  "$src/tests/coupling/same_results.sh" "$work/one" "$work/ranks$n" || { echo "$n ranks: results differ"; exit 1; }
+  [ "$touching" -gt 1 ] || { echo "$name: surface contacts on $touching rank(s), want more than one"; exit 1; }
+  shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/$name.log")
+  grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/$name.log" &&
+    [ "${shifts:-0}" -gt 0 ] || { echo "$name: the window did not shift while distributed"; exit 1; }
+  "$src/tests/coupling/same_results.sh" "$work/one" "$work/$name" || { echo "$name: results differ"; exit 1; }
 done
-echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks"
+echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks" \
+     "and for the scene's 2 ranks balanced by time"

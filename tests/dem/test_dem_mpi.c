@@ -8,6 +8,8 @@
  *
  *   mpirun -np N test_dem_mpi same_bits      (registered for N = 1, 2, 3)
  *   mpirun -np 3 test_dem_mpi same_bits_spring
+ *   mpirun -np 2 test_dem_mpi same_bits_time  (slabs balanced by measured
+ *                                              time, rank 1 made slow)
  *   mpirun -np 1 test_dem_mpi slab_bounds    (the slab split alone)
  *
  * Every rank runs the case; the verdict is agreed (any rank failing fails
@@ -19,11 +21,13 @@
 #include "dem_mpi.h"
 #include "dem_world.h"
 #include "test_dem_common.h"
+#include "timer.h"
 
 enum { N_GRAINS = 3000, STEPS = 1500 };
 
 static int g_rank, g_size;
 static int g_model = DEM_ROLLING_CONSTANT_TORQUE; /* same_bits_spring: the rolling spring */
+
 
 /* The world of the case: on rank 0 the grains and walls, elsewhere empty. */
 static int make_world(int with_grains, dem_world **out)
@@ -243,6 +247,55 @@ static int same_bits(void)
     return 0;
 }
 
+/* Slabs balanced by measured time (dem_mpi_set_balance): after each step
+ * rank 1 works 10 us more per grain it owns (a step costs a few us per
+ * grain or less, more under the sanitizers), outside the step, where the
+ * balance counts it as the rank's own work. Rank 1 must end with clearly
+ * fewer grains than rank 0 (even counts under the grain balance, same_bits)
+ * and the state must be one process's, bit for bit (rank 0 steps the
+ * reference alone first, so that its own time is the distributed world's). */
+static int same_bits_time(void)
+{
+    ENSURE(g_size == 2);
+    cm_error err = {0};
+    uint64_t want = 0, got = 0;
+    dem_world *w = NULL;
+    if (g_rank == 0) {
+        ENSURE(make_world(1, &w) == 0);
+        for (int k = 0; k < STEPS; k++)
+            ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
+        want = dem_world_hash(w);
+        dem_world_destroy(&w);
+    }
+    ENSURE(make_world(g_rank == 0, &w) == 0);
+    ENSURE_MSG(dem_mpi_attach(w, MPI_COMM_WORLD, &err) == 0, "%s", err.msg);
+    ENSURE(dem_mpi_set_balance(w, DEM_MPI_BALANCE_TIME) == 0);
+    ENSURE(dem_mpi_set_balance(w, 7) == CM_ERR_STATE);
+    dem_mpi_stats s;
+    for (int k = 0; k < STEPS; k++) {
+        ENSURE_MSG(dem_step(w, &err) == 0, "rank %d: %s", g_rank, err.msg);
+        dem_mpi_stats_get(w, &s);
+        const double until = cm_now() + 10e-6 * s.owned;
+        while (g_rank == 1 && cm_now() < until)
+            ;
+    }
+    ENSURE_MSG(dem_mpi_hash(w, &got, &err) == 0, "%s", err.msg);
+    int owned[2] = {0, 0};
+    MPI_Allgather(&s.owned, 1, MPI_INT, owned, 1, MPI_INT, MPI_COMM_WORLD);
+    dem_stats st;
+    dem_world_stats(w, &st);
+    if (g_rank == 0)
+        printf("time balance, %ld rebuilds: rank 0 owns %d grains, the slow rank 1 %d; state hash: one process "
+               "%016llx, 2 ranks %016llx\n", st.profile.rebuilds, owned[0], owned[1], (unsigned long long)want,
+               (unsigned long long)got);
+    dem_mpi_detach(w);
+    dem_world_destroy(&w);
+    ENSURE(st.profile.rebuilds > 5);
+    ENSURE(owned[1] < 0.75 * owned[0]);
+    ENSURE(g_rank > 0 || got == want);
+    return 0;
+}
+
 /* The split of cell columns into slabs: even grain counts where whole
  * columns allow, at least one column per rank, too few columns refused. */
 static int slab_bounds(void)
@@ -275,7 +328,10 @@ static int same_bits_spring(void)
 }
 
 static const test_case tests[] = {
-    {"same_bits", same_bits}, {"same_bits_spring", same_bits_spring}, {"slab_bounds", slab_bounds}};
+    {"same_bits", same_bits},
+    {"same_bits_spring", same_bits_spring},
+    {"same_bits_time", same_bits_time},
+    {"slab_bounds", slab_bounds}};
 
 /* A failing rank stops all of them (the others may wait in a collective). */
 int main(int argc, char **argv)

@@ -28,7 +28,6 @@ enum { N_GRAINS = 3000, STEPS = 1500 };
 static int g_rank, g_size;
 static int g_model = DEM_ROLLING_CONSTANT_TORQUE; /* same_bits_spring: the rolling spring */
 
-
 /* The world of the case: on rank 0 the grains and walls, elsewhere empty. */
 static int make_world(int with_grains, dem_world **out)
 {

@@ -400,8 +400,8 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
          * ranks is the one process's), a failing one stops them all */
         if (n % 100 == 0 && (rc = check_health(w, def, err)))
             goto done;
-        /* the grains of every rank for the progress line, as often as the check */
-        if (n % 100 == 0 && (rc = dist ? dist->grains(w, &grains, dist->user, err) : CM_OK))
+        /* the grains of every rank for the progress line (if any), as often as the check */
+        if (dist && def->progress_every > 0 && n % 100 == 0 && (rc = dist->grains(w, &grains, dist->user, err)))
             goto done;
         double now = cm_now();
         if (root && def->progress_every > 0 && now - last_progress >= def->progress_every) {

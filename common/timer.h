@@ -22,4 +22,14 @@ static inline double cm_cpu_now(void)
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* CPU seconds the calling thread has used (CLOCK_THREAD_CPUTIME_ID): over a
+ * wait, what it spent spinning; the rest of the wait's wall time its core
+ * ran something else. */
+static inline double cm_thread_cpu_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 #endif

@@ -19,6 +19,11 @@
  *   dem_step_grains(w, err)                      grain–grain, Verlet completion,
  *                                                x(t) -> x(t+dt), time += dt
  * A walls-only step is dem_step_surface then dem_step_grains (dem_step does both).
+ * dem_step_surface_then(w, fn, user, err) in dem_step_surface's place hands
+ * the node forces and totals to fn as soon as they are ready: at once in one
+ * process; in a distributed run, where the ranks' contacts are summed on
+ * rank 0, between blocks of the next dem_step_grains' grain pairs (or after
+ * them), so that no rank waits for the slowest surface pass.
  *
  * Velocities: the integrator is velocity Verlet in its predictor/corrector
  * form (paper sec. 2.1.1). Between steps a grain holds x(t+dt) and the
@@ -99,6 +104,12 @@ typedef struct dem_world_def {
     int rolling_model;       /* enum dem_rolling_model (default constant torque) */
     bool portable_kernel;    /* true: the pair kernel's portable path even where the CPU has AVX2 (the
                                 same bits either way; for the test that shows it) */
+    double gather_test_every; /* s, distributed: how often the surface contacts' gather to rank 0 is tested
+                                 among the grain pairs (dem_step_surface_then); default 1.25e-4. A test costs
+                                 a few us (MPI progress, a yield); testing seldom delays fem_server's step,
+                                 which on two cores must overlap the other ranks' pairs: on the paper scene
+                                 on 2 ranks, tests every ~130 us ran 3 % faster than every ~35 us and 10 %
+                                 faster than every ~500 us (session 15). 0: after every block of pairs */
 } dem_world_def;
 
 dem_world_def dem_world_def_default(void);
@@ -268,6 +279,10 @@ void dem_surface_totals(const dem_world *w, dem_surface_total *t);
 int dem_step_surface(dem_world *w, cm_error *err);
 int dem_step_grains(dem_world *w, cm_error *err);
 int dem_step(dem_world *w, cm_error *err); /* both */
+/* What is to be done with a surface pass's node forces and totals (rank 0:
+ * the whole surface's); an error stops the step with it. */
+typedef int (*dem_surface_ready_fn)(dem_world *w, void *user, cm_error *err);
+int dem_step_surface_then(dem_world *w, dem_surface_ready_fn fn, void *user, cm_error *err);
 
 /* ---- Diagnostics ------------------------------------------------------ */
 
@@ -280,8 +295,11 @@ typedef struct dem_profile {
     double integrate; /* s, Verlet, rotation, the moved-grain check */
     double halo;      /* s, distributed run: ghosts refreshed and the rebuild decision agreed by every rank */
     double migrate;   /* s, distributed run: slabs, grains to their new ranks, fresh ghosts (part of rebuild) */
-    double surf_gather; /* s, distributed run: the ranks' surface contacts gathered and summed on rank 0 (part of surface) */
+    double surf_gather; /* s, distributed run: the ranks' surface contacts gathered and summed on rank 0 (part of
+                         * surface, also where its end falls among the grain pairs) */
     double idle;      /* s, outside the step: the coupled loop waiting for fem_server's reply or (other ranks) rank 0's */
+    double wait_cpu;  /* s, distributed run: this rank's CPU time in halo, migrate, surf_gather and idle, the part
+                       * of those waits its core had nothing else to do (the rest it ran fem_server, say) */
     long steps;       /* steps timed */
     long rebuilds;    /* neighbour list rebuilds */
     long surface_lists; /* rebuilds of the grains' triangle lists (the tree walked instead of the lists) */
@@ -308,8 +326,9 @@ typedef struct dem_stats {
 } dem_stats;
 
 void dem_world_stats(const dem_world *w, dem_stats *s);
-/* Adds to the profile's idle time (the coupled loop's waits outside the step). */
-void dem_world_add_idle(dem_world *w, double seconds);
+/* Adds to the profile's idle time (the coupled loop's waits outside the step):
+ * seconds of wall time, cpu_seconds of the calling thread's CPU time in them. */
+void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds);
 /* Steps taken so far (cheap; dem_world_stats sums over every grain and pair). */
 long dem_world_steps(const dem_world *w);
 /* Total force on wall k from the last step (the grains push it), N. */

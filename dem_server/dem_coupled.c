@@ -7,14 +7,17 @@
  *             dem_step_surface (gravity, walls, triangles at x(t)), node
  *             forces and totals summed; between them the first k - 1
  *             dem_step_grains
- *   send      the interval's mean node forces (eq. 42) and totals posted
+ *   send      the interval's mean node forces (eq. 42) and totals posted,
+ *             as soon as the last pass is summed (dem_step_surface_then:
+ *             surface_ready): in one process right after it; distributed,
+ *             once rank 0 has every rank's contacts (surf_gather,
+ *             dem_mpi.c), among the grain pairs of the next stage, so
+ *             that no rank idles while the slowest surface pass ends
  *   grains    the last dem_step_grains (grain pairs, integrate,
  *             neighbour rebuild): overlaps the FEM's step
  *   wait      the FEM's reply: surface positions and velocities at t + k dt
  *   surf_bcast distributed (def->dist): the reply from rank 0, the one that
- *             talks to fem_server, to the other ranks (the node forces
- *             were gathered on rank 0 in the surface stage: surf_gather,
- *             dem_mpi.c)
+ *             talks to fem_server, to the other ranks
  *   update    dem_surface_update (BVH refit), the terrain window moved
  *   record    output hook, checkpoint, health check, progress line
  * The FEM needs only the forces, so everything after send runs while it
@@ -31,11 +34,20 @@
 
 typedef struct coupled {
     dem_world *w;
+    const dem_coupled_def *def;
     ipc_channel *ch; /* NULL on the ranks other than 0 */
+    int root;        /* talks to fem_server */
     uint32_t nn;
     int *tris;
     double *f_sum, *x, *v, *x_sub, *mass;
     double w_dem; /* J, interface work seen by the DEM */
+    /* the exchange in progress, for stage send (surface_ready) */
+    dem_surface_total acc; /* the interval's surface totals */
+    double time;
+    long n;
+    int *asked_checkpoint;
+    int ipc_rc;    /* the send's ring status */
+    double send_s; /* s, stage send so far */
 } coupled;
 
 static void coupled_free(coupled *c)
@@ -100,41 +112,6 @@ static void lap(double *t, double *acc)
     *t = now;
 }
 
-/* Stage "surface": the interval's k surface steps (and the k - 1 grain steps
- * between them), node forces summed into c->f_sum, totals into *acc. */
-static int stage_surface(coupled *c, const dem_coupled_def *def, int finish, dem_surface_total *acc, cm_error *err)
-{
-    const size_t m = 3 * (size_t)c->nn;
-    const int k_steps = def->exchange_every;
-    int rc;
-    memset(acc, 0, sizeof *acc);
-    memset(c->f_sum, 0, m * sizeof *c->f_sum);
-    if (finish)
-        return CM_OK;
-    for (int j = 0; j < k_steps; j++) {
-        if (j > 0 && (rc = move_surface(c, j * def->dt, err)))
-            return rc;
-        if ((rc = dem_step_surface(c->w, err)))
-            return rc;
-        const double *fn = dem_surface_node_forces(c->w);
-        for (size_t q = 0; q < m; q++)
-            c->f_sum[q] += fn[q];
-        dem_surface_total tt;
-        dem_surface_totals(c->w, &tt);
-        for (int a = 0; a < 3; a++) {
-            acc->force[a] += tt.force[a];
-            acc->moment[a] += tt.moment[a];
-        }
-        acc->traction_pos += tt.traction_pos;
-        acc->traction_neg += tt.traction_neg;
-        acc->contacts += tt.contacts;
-        acc->energy += tt.energy;
-        if (j < k_steps - 1 && (rc = dem_step_grains(c->w, err)))
-            return rc;
-    }
-    return CM_OK;
-}
-
 /* Stage "send": the interval's mean forces (or the finish frame) posted.
  * Returns the ring's status (an ipc error: the caller reports the peer). */
 static int stage_send(coupled *c, const dem_coupled_def *def, int finish, double time, long n,
@@ -173,6 +150,68 @@ static int stage_send(coupled *c, const dem_coupled_def *def, int finish, double
         }
     }
     return ipc_send_commit(c->ch);
+}
+
+/* One surface pass's node forces added into c->f_sum, its totals into c->acc. */
+static void add_pass(coupled *c)
+{
+    const size_t m = 3 * (size_t)c->nn;
+    dem_surface_total *acc = &c->acc;
+    const double *fn = dem_surface_node_forces(c->w);
+    for (size_t q = 0; q < m; q++)
+        c->f_sum[q] += fn[q];
+    dem_surface_total tt;
+    dem_surface_totals(c->w, &tt);
+    for (int a = 0; a < 3; a++) {
+        acc->force[a] += tt.force[a];
+        acc->moment[a] += tt.moment[a];
+    }
+    acc->traction_pos += tt.traction_pos;
+    acc->traction_neg += tt.traction_neg;
+    acc->contacts += tt.contacts;
+    acc->energy += tt.energy;
+}
+
+/* The interval's last surface pass, once summed (distributed: every rank's
+ * contacts on rank 0, dem_step_surface_then): added, then stage "send" on
+ * rank 0. Its time goes to stage send wherever it ran (c->send_s). */
+static int surface_ready(dem_world *w, void *user, cm_error *err)
+{
+    coupled *c = user;
+    const double t0 = cm_now();
+    int rc = CM_OK;
+    (void)w;
+    add_pass(c);
+    if (c->root && (c->ipc_rc = stage_send(c, c->def, 0, c->time, c->n, &c->acc, c->asked_checkpoint)))
+        rc = cm_fail(err, CM_ERR_PEER, "%s", ipc_error(c->ch));
+    c->send_s += cm_now() - t0;
+    return rc;
+}
+
+/* Stage "surface": the interval's k surface steps (and the k - 1 grain steps
+ * between them), node forces summed into c->f_sum, totals into c->acc; the
+ * last one hands on to surface_ready. */
+static int stage_surface(coupled *c, const dem_coupled_def *def, int finish, cm_error *err)
+{
+    const size_t m = 3 * (size_t)c->nn;
+    const int k_steps = def->exchange_every;
+    int rc;
+    memset(&c->acc, 0, sizeof c->acc);
+    memset(c->f_sum, 0, m * sizeof *c->f_sum);
+    if (finish)
+        return CM_OK;
+    for (int j = 0; j < k_steps; j++) {
+        if (j > 0 && (rc = move_surface(c, j * def->dt, err)))
+            return rc;
+        if (j == k_steps - 1)
+            return dem_step_surface_then(c->w, surface_ready, c, err);
+        if ((rc = dem_step_surface(c->w, err)))
+            return rc;
+        add_pass(c);
+        if ((rc = dem_step_grains(c->w, err)))
+            return rc;
+    }
+    return CM_OK;
 }
 
 int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *err)
@@ -241,11 +280,12 @@ static int bcast_surface(coupled *c, const dem_coupled_dist *dist, uint32_t *nt,
 int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
                     cm_error *err)
 {
-    coupled c = {.w = w, .ch = ch};
-    int rc = CM_OK;     /* common/error.h codes */
-    int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, mapped to CM_ERR_PEER at the end */
     const dem_coupled_dist *dist = def->dist;
     const int root = !dist || dist->rank == 0; /* talks to fem_server */
+    int stop_requested = 0, asked_checkpoint = 0;
+    coupled c = {.w = w, .def = def, .ch = ch, .root = root, .asked_checkpoint = &asked_checkpoint};
+    int rc = CM_OK;     /* common/error.h codes */
+    int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, mapped to CM_ERR_PEER at the end */
 
     uint32_t nt = 0;
     if (root) {
@@ -302,7 +342,6 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     const double interval = def->dt * k_steps;
     double time = 0, last_progress = cm_now(), t_start = cm_now();
     long n = 0;
-    int stop_requested = 0, asked_checkpoint = 0;
     if (hooks && hooks->restore) {
         /* distributed: rank 0 reads the checkpoint (one process's), the
          * loop's state goes to every rank, the grains at the first rebuild */
@@ -332,19 +371,30 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     double t_lap = cm_now();
     for (;; n++) {
         int finish = stop_requested || time >= def->end_time - 0.5 * def->dt;
-        dem_surface_total acc;
-        if ((rc = stage_surface(&c, def, finish, &acc, err)))
+        /* stage send runs where the last surface pass is ready: right after
+         * it, or (distributed) among the grain pairs; its time is its own */
+        c.time = time, c.n = n;
+        const double send0 = c.send_s;
+        rc = stage_surface(&c, def, finish, err);
+        if (c.ipc_rc) /* distributed: dem_server stops the other ranks (MPI_Abort) */
+            break;
+        if (rc)
             goto done;
         lap(&t_lap, &prof.surface);
-        if (root && (ipc_rc = stage_send(&c, def, finish, time, n, &acc, &asked_checkpoint)))
-            break; /* distributed: dem_server stops the other ranks (MPI_Abort) */
+        const double send1 = c.send_s;
+        if (finish && root && (ipc_rc = stage_send(&c, def, finish, time, n, &c.acc, &asked_checkpoint)))
+            break;
         lap(&t_lap, &prof.send);
-        if (!finish && (rc = dem_step_grains(w, err)))
+        rc = finish ? CM_OK : dem_step_grains(w, err);
+        if (c.ipc_rc)
+            break;
+        if (rc)
             goto done;
         lap(&t_lap, &prof.grains);
+        prof.surface -= send1 - send0, prof.grains -= c.send_s - send1, prof.send += c.send_s - send0;
 
         reply in = {0};
-        const double idle0 = prof.wait + prof.bcast;
+        const double idle0 = prof.wait + prof.bcast, cpu0 = dist ? cm_thread_cpu_now() : 0.0;
         if (root) {
             const ipc_frame_head *head;
             const double *q;
@@ -371,7 +421,8 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if (dist)
             prof.bcast_bytes += (double)(sizeof in + (in.kind == IPC_FRAME_DATA ? 2 * m * sizeof *c.x : 0));
         lap(&t_lap, &prof.bcast);
-        dem_world_add_idle(w, prof.wait + prof.bcast - idle0); /* what the time balance leaves out (dem_mpi.c) */
+        /* what the time balance leaves out (dem_mpi.c) */
+        dem_world_add_idle(w, prof.wait + prof.bcast - idle0, dist ? cm_thread_cpu_now() - cpu0 : 0.0);
         const uint32_t kind = (uint32_t)in.kind, flags = (uint32_t)in.flags;
         stop_requested = in.stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)
@@ -411,13 +462,15 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             double steps = (double)(n + 1 - n_first) * k_steps;
             cm_log_info("t = %.4f s  %.0f steps/s (%.2f M grain-steps/s)  grains %ld  surface contacts %.0f", time,
                         steps / (now - t_start), 1e-6 * steps * (double)grains / (now - t_start), grains,
-                        acc.contacts / (double)k_steps);
+                        c.acc.contacts / (double)k_steps);
         }
         lap(&t_lap, &prof.record);
         prof.exchanges++;
     }
     if (def->profile)
         *def->profile = prof;
+    if (c.ipc_rc)
+        ipc_rc = c.ipc_rc;
     if (ipc_rc) {
         /* The exchange failed: ipc's message names the peer and the step. */
         rc = cm_fail(err, CM_ERR_PEER, "%s", ipc_error(c.ch));

@@ -421,9 +421,11 @@ static void report_profile(const dem_profile *p, const dem_coupled_profile *c, c
  * integrate), halo (ghost refresh and the agreed rebuild decision), migrate
  * (slabs, migration, ghosts at a rebuild), surf_gather (the surface
  * contacts reduced on rank 0) and, coupled, surf_bcast (the reply from rank
- * 0, which the other ranks wait in) and wait (rank 0: for fem_server). One
+ * 0, which the other ranks wait in) and wait (rank 0: for fem_server); then
+ * compute split into its stages (surface, pairs, integrate, rebuild without
+ * the migration) and, coupled, update (the surface moved, the window). One
  * process writes its one row the same way (zeros for the communication). */
-enum { RANK_COLS = 10 };
+enum { RANK_COLS = 15 };
 
 static void report_rank_profiles(const dem_profile *p, const dem_coupled_profile *c, int owned, int ghosts,
                                  const char *dir)
@@ -431,7 +433,9 @@ static void report_rank_profiles(const dem_profile *p, const dem_coupled_profile
     const double compute = p->rebuild - p->migrate + p->surface - p->surf_gather + p->pairs + p->integrate;
     const double mine[RANK_COLS] = {owned,         ghosts,           (double)p->steps, compute,
                                     p->halo,       p->migrate,       p->surf_gather,   c ? c->bcast : 0.0,
-                                    c ? c->wait : 0.0, p->rebuild + p->surface + p->pairs + p->integrate + p->halo};
+                                    c ? c->wait : 0.0, p->rebuild + p->surface + p->pairs + p->integrate + p->halo,
+                                    p->surface - p->surf_gather, p->pairs, p->integrate, p->rebuild - p->migrate,
+                                    c ? c->update : 0.0};
     double *all = g_rank == 0 ? malloc((size_t)g_ranks * sizeof mine) : NULL;
     if (g_rank == 0 && !all)
         cm_log_warn("out of memory for the ranks' profiles");
@@ -454,11 +458,12 @@ static void report_rank_profiles(const dem_profile *p, const dem_coupled_profile
         free(all);
         return;
     }
-    fprintf(f, "rank,ranks,grains,ghosts,steps,compute_s,halo_s,migrate_s,surf_gather_s,surf_bcast_s,wait_s,step_s\n");
+    fprintf(f, "rank,ranks,grains,ghosts,steps,compute_s,halo_s,migrate_s,surf_gather_s,surf_bcast_s,wait_s,step_s,"
+               "surface_s,pairs_s,integrate_s,rebuild_s,update_s\n");
     for (int r = 0; r < g_ranks; r++) {
         const double *v = all + (size_t)r * RANK_COLS;
-        fprintf(f, "%d,%d,%.0f,%.0f,%.0f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", r, g_ranks, v[0], v[1], v[2], v[3],
-                v[4], v[5], v[6], v[7], v[8], v[9]);
+        fprintf(f, "%d,%d,%.0f,%.0f,%.0f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", r, g_ranks,
+                v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10], v[11], v[12], v[13], v[14]);
     }
     if (fclose(f) != 0)
         cm_log_warn("cannot write %s", path);
@@ -698,9 +703,10 @@ static int run(const options *o)
                         "migration %.2f s", g_rank, g_ranks, ms.owned, ms.ghosts, ms.col_lo, ms.col_hi,
                         ms.migrated, s.profile.halo, s.profile.migrate);
             if (!o->standalone)
-                cm_log_info("rank %d of %d: %ld surface contacts over %ld passes; surf_gather %.2f s, surf_bcast "
-                            "%.2f s; %ld window shifts collected", g_rank, g_ranks, ms.surf_contacts,
-                            ms.surf_gathers, s.profile.surf_gather, cprof.bcast, ms.collects);
+                cm_log_info("rank %d of %d: %ld surface contacts over %ld passes (%ld gathers ended among the "
+                            "grain pairs); surf_gather %.2f s, surf_bcast %.2f s; %ld window shifts collected",
+                            g_rank, g_ranks, ms.surf_contacts, ms.surf_gathers, ms.surf_early,
+                            s.profile.surf_gather, cprof.bcast, ms.collects);
             if (!o->standalone && g_rank == 0 && ms.surf_gathers > 0 && cprof.exchanges > 0)
                 cm_log_info("MPI traffic of the surface: %.0f bytes broadcast per exchange, %.0f bytes of contacts "
                             "gathered on rank 0 per DEM step (mean)", cprof.bcast_bytes / (double)cprof.exchanges,

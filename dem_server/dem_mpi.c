@@ -1,5 +1,5 @@
 /* The distributed world (dem_mpi.h): slabs along x, ghosts, migration. The
- * step (dem_step.c) calls three stages through w->dist:
+ * step (dem_step.c) calls these stages through w->dist:
  *   rebuild  global box and grid (allreduce) -> slab bounds from the grain
  *            counts per cell column (allreduce) -> owned grains leaving the
  *            slab sent to their new ranks with the springs of their pairs
@@ -9,6 +9,8 @@
  *            owners (two sendrecv)
  *   agree    the largest displacement and the non-finite flag over all
  *            ranks (allreduce), so that every rank rebuilds at the same step
+ *   surf_gather (begin, end) after a surface pass: the ranks' contacts
+ *            summed on rank 0 (isend, improbe and imrecv)
  * Layout of a rank's slots after a rebuild: [left ghosts | owned | right
  * ghosts], the global order restricted to them (cells x slowest): the left
  * ghosts are the left neighbour's grains of its last column in its order,
@@ -37,7 +39,7 @@ typedef struct dist_ctx {
     int balance;
     double cost;               /* busy s per owned grain-step here, smoothed; 0 before the first measure */
     double *costs;             /* size: every rank's cost */
-    double wall_mark, wait_mark; /* at the previous rebuild: the clock, the waits (busy_waits) */
+    double wall_mark, wait_mark; /* at the previous rebuild: the clock, the waits' CPU time (dem_profile.wait_cpu) */
     long steps_mark, own_mark; /* steps then, grains owned since */
     int *dest;                 /* per slot: rank of the grain's new slab (owned grains) */
     int *scount, *sdispl, *rcount, *rdispl; /* size each, alltoallv */
@@ -49,7 +51,10 @@ typedef struct dist_ctx {
     size_t hsbuf_cap, hrbuf_cap;
     double *psbuf, *prbuf;     /* packed surface contacts: this rank's, every rank's (rank 0) */
     size_t psbuf_cap, prbuf_cap;
-    long surf_contacts, surf_gathers, surf_doubles;
+    MPI_Request surf_req;      /* this rank's contacts on their way (rank 0: the message of rank surf_next) */
+    int surf_next, surf_cnt;   /* rank 0: the rank whose contacts come next, the doubles it sends */
+    long surf_got;             /* rank 0: doubles in prbuf so far */
+    long surf_contacts, surf_gathers, surf_doubles, surf_early;
     long collects;             /* dem_mpi_collect calls (terrain window shifts) */
     dem_hash extra;            /* received springs, by tag pair */
     double *extra_val;
@@ -152,22 +157,6 @@ static int mpi_fail(cm_error *err, int code, const char *what, long step)
     return cm_fail(err, CM_ERR_IO, "step %ld: MPI %s failed: %s", step, what, msg);
 }
 
-/* The first half of a gather to rank 0: every rank's count (MPI_Gather)
- * and, on rank 0, the displacements of their concatenation in rank order
- * (the global grain order) and their sum into *total if not NULL (0 on the
- * other ranks). */
-static int gather_counts(const dist_ctx *d, int cnt, int *counts, int *displ, long *total)
-{
-    int rc = MPI_Gather(&cnt, 1, MPI_INT, counts, 1, MPI_INT, 0, d->comm);
-    long sum = 0;
-    if (rc == MPI_SUCCESS && d->rank == 0)
-        for (int r = 0; r < d->size; r++)
-            displ[r] = (int)sum, sum += counts[r];
-    if (total)
-        *total = sum;
-    return rc;
-}
-
 int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err)
 {
     if (n_cols < ranks)
@@ -198,18 +187,18 @@ int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_erro
     return CM_OK;
 }
 
-/* What a rank spends waiting for the others (halo, the rebuild's
- * migration and agreements, the surface gather) or, coupled, for
- * fem_server or rank 0's reply: the clock minus these is its busy time. */
-static double busy_waits(const dem_profile *p) { return p->halo + p->migrate + p->surf_gather + p->idle; }
-
 /* The time balance (LAMMPS' "fix balance ... weight time" in spirit): one
  * of this rank's grains weighs its busy seconds per grain-step since the
- * previous rebuild (the clock minus busy_waits: its grains' stages, and on
- * rank 0 also the exchange's own work), averaged over rebuilds, relative
- * to the slowest rank's. A rank that shares its core (with fem_server,
- * say), holds the tire's contacts or does rank 0's serial work measures
- * more per grain and gets fewer. Weights are integers (1..1024), so the
+ * previous rebuild, averaged over rebuilds, relative to the slowest rank's.
+ * Busy is the clock minus the CPU time spent in the waits for the others
+ * (halo, the rebuild's migration and agreements, the surface gather) and,
+ * coupled, for fem_server or rank 0's reply (dem_profile.wait_cpu): a wait
+ * in which the rank had its core to itself spins, one in which its core ran
+ * something else (fem_server stepping beside rank 0) is busy for the core.
+ * Wall times would count fem_server's step as rank 0's idle whenever it
+ * fell in a wait, and give rank 0 more grains than its core can carry. A
+ * rank that shares its core, holds the tire's contacts or does rank 0's
+ * serial work measures more per grain and gets fewer. Weights are integers (1..1024), so the
  * column sums are exact and the bounds the same on every rank; which rank
  * owns a grain never changes a result (dem_mpi.h). Every grain weighs 1
  * until each rank has a measure. */
@@ -218,7 +207,7 @@ static int grain_weight(dem_world *w, dist_ctx *d, long *weight, cm_error *err)
     *weight = 1;
     if (d->balance != DEM_MPI_BALANCE_TIME)
         return CM_OK;
-    const double now = cm_now(), waits = busy_waits(&w->prof);
+    const double now = cm_now(), waits = w->prof.wait_cpu;
     const long steps = w->prof.steps - d->steps_mark;
     if (d->distributed && steps > 0 && d->own_mark > 0) {
         const double c = ((now - d->wall_mark) - (waits - d->wait_mark)) / ((double)steps * (double)d->own_mark);
@@ -266,7 +255,7 @@ static int dist_rebuild(dem_world *w, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;
     dem_grains *g = &w->g;
-    const double t0 = cm_now();
+    const double t0 = cm_now(), c0 = cm_thread_cpu_now();
     int rc;
     const int own_lo = w->own_lo, own_hi = w->own_hi;
     /* 1. the global box and grid (over the owned grains of every rank) */
@@ -458,6 +447,7 @@ static int dist_rebuild(dem_world *w, cm_error *err)
     w->hist_extra_val = d->extra_val;
     const double t1 = cm_now();
     w->prof.migrate += t1 - t0;
+    w->prof.wait_cpu += cm_thread_cpu_now() - c0;
     rc = dem_neighbour_rebuild(w, err);
     w->hist_extra = NULL;
     w->hist_extra_val = NULL;
@@ -538,44 +528,103 @@ static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
 }
 
 /* Stage "surf_gather", after every surface pass: the ranks' contacts
- * (dem_surface_pack: in slot order, owned grains only) gathered on rank 0
- * in rank order, which is the global grain order (the slabs are contiguous
- * ranges of it), and summed there as one process sums its own
+ * (dem_surface_pack: in slot order, owned grains only) to rank 0, summed
+ * there in rank order, which is the global grain order (the slabs are
+ * contiguous ranges of it), as one process sums its own
  * (dem_surface_sum_packed): the node forces sent to fem_server are the same
  * bits for any number of ranks. Each rank keeps its own largest overlap
  * (and its grain) for the health check: the largest over the ranks is the
- * one process's. */
-static int dist_surf_gather(dem_world *w, cm_error *err)
+ * one process's.
+ * Begun after the pass, ended when the step needs it (dem_step.c): the
+ * other ranks send theirs without waiting (MPI_Isend), rank 0 takes them
+ * in rank order as they come (MPI_Improbe, MPI_Imrecv), so that between
+ * tests each rank goes on with its grain pairs instead of waiting for the
+ * slowest surface pass. */
+enum { TAG_SURF = 5 };
+
+static int dist_surf_gather_begin(dem_world *w, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;
-    dem_surface *s = w->surf;
-    const double t0 = cm_now();
+    const double t0 = cm_now(), c0 = cm_thread_cpu_now();
     const long n = dem_surface_packed_size(w);
-    int rc;
-    if (n > INT_MAX || grow(&d->psbuf, &d->psbuf_cap, (size_t)n + 1))
+    double **buf = d->rank == 0 ? &d->prbuf : &d->psbuf;
+    size_t *cap = d->rank == 0 ? &d->prbuf_cap : &d->psbuf_cap;
+    if (n > INT_MAX || grow(buf, cap, (size_t)n + 1))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room to pack %ld doubles of surface contacts", w->step, n);
-    dem_surface_pack(w, d->psbuf);
-    d->surf_contacts += s->tot.contacts;
-    int cnt = (int)n;
-    long total;
-    if ((rc = gather_counts(d, cnt, d->rcount, d->rdispl, &total)) != MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the surface contact counts", w->step);
-    if (d->rank == 0 && (total > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)total + 1)))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step, total);
-    if ((rc = MPI_Gatherv(d->psbuf, cnt, MPI_DOUBLE, d->prbuf, d->rcount, d->rdispl, MPI_DOUBLE, 0, d->comm)) !=
-        MPI_SUCCESS)
-        return mpi_fail(err, rc, "gather of the surface contacts", w->step);
-    if (d->rank == 0) {
-        const double max_overlap = s->tot.max_overlap;
-        const int worst_grain = s->tot.worst_grain, worst_tri = s->tot.worst_tri;
-        if ((rc = dem_surface_sum_packed(w, d->prbuf, total, err)))
-            return rc;
-        s->tot.max_overlap = max_overlap, s->tot.worst_grain = worst_grain, s->tot.worst_tri = worst_tri;
-        d->surf_doubles += total;
-    }
-    d->surf_gathers++;
+    dem_surface_pack(w, *buf); /* rank 0's own first, the others' after them */
+    d->surf_contacts += w->surf->tot.contacts;
+    d->surf_got = n, d->surf_next = 1;
+    int rc = MPI_SUCCESS;
+    if (d->rank > 0)
+        rc = MPI_Isend(d->psbuf, (int)n, MPI_DOUBLE, 0, TAG_SURF, d->comm, &d->surf_req);
     w->prof.surf_gather += cm_now() - t0;
+    w->prof.wait_cpu += cm_thread_cpu_now() - c0;
+    return rc == MPI_SUCCESS ? CM_OK : mpi_fail(err, rc, "send of the surface contacts", w->step);
+}
+
+/* Rank 0: the next ranks' contacts in rank order, as far as they have come
+ * (wait: all of them); *done once every rank's are summed. */
+static int surf_take(dem_world *w, dist_ctx *d, int wait, int *done, cm_error *err)
+{
+    int rc = MPI_SUCCESS, flag = 1;
+    *done = 0;
+    while (d->surf_next < d->size) {
+        if (d->surf_req == MPI_REQUEST_NULL) { /* rank surf_next's message not yet matched */
+            MPI_Message msg;
+            MPI_Status st;
+            int cnt;
+            rc = wait ? MPI_Mprobe(d->surf_next, TAG_SURF, d->comm, &msg, &st)
+                      : MPI_Improbe(d->surf_next, TAG_SURF, d->comm, &flag, &msg, &st);
+            if (rc != MPI_SUCCESS)
+                return mpi_fail(err, rc, "probe for the surface contacts", w->step);
+            if (!flag)
+                return CM_OK;
+            if ((rc = MPI_Get_count(&st, MPI_DOUBLE, &cnt)) != MPI_SUCCESS || cnt == MPI_UNDEFINED)
+                return cm_fail(err, CM_ERR_PEER, "step %ld: rank %d sent a broken message of surface contacts",
+                               w->step, d->surf_next);
+            if (d->surf_got + cnt > INT_MAX || grow(&d->prbuf, &d->prbuf_cap, (size_t)(d->surf_got + cnt) + 1))
+                return cm_fail(err, CM_ERR_NOMEM, "step %ld: no room for %ld doubles of surface contacts", w->step,
+                               d->surf_got + cnt);
+            if ((rc = MPI_Imrecv(d->prbuf + d->surf_got, cnt, MPI_DOUBLE, &msg, &d->surf_req)) != MPI_SUCCESS)
+                return mpi_fail(err, rc, "receive of the surface contacts", w->step);
+            d->surf_cnt = cnt;
+        }
+        rc = wait ? MPI_Wait(&d->surf_req, MPI_STATUS_IGNORE) : MPI_Test(&d->surf_req, &flag, MPI_STATUS_IGNORE);
+        if (rc != MPI_SUCCESS)
+            return mpi_fail(err, rc, "receive of the surface contacts", w->step);
+        if (!flag)
+            return CM_OK;
+        d->surf_got += d->surf_cnt, d->surf_next++;
+    }
+    dem_surface *s = w->surf;
+    const double max_overlap = s->tot.max_overlap;
+    const int worst_grain = s->tot.worst_grain, worst_tri = s->tot.worst_tri;
+    if ((rc = dem_surface_sum_packed(w, d->prbuf, d->surf_got, err)))
+        return rc;
+    s->tot.max_overlap = max_overlap, s->tot.worst_grain = worst_grain, s->tot.worst_tri = worst_tri;
+    d->surf_doubles += d->surf_got;
+    *done = 1;
     return CM_OK;
+}
+
+static int dist_surf_gather_end(dem_world *w, int wait, int *done, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    const double t0 = cm_now(), c0 = cm_thread_cpu_now();
+    int rc = CM_OK, flag = 1;
+    if (d->rank == 0)
+        rc = surf_take(w, d, wait, &flag, err);
+    else {
+        int mrc = wait ? MPI_Wait(&d->surf_req, MPI_STATUS_IGNORE) : MPI_Test(&d->surf_req, &flag, MPI_STATUS_IGNORE);
+        if (mrc != MPI_SUCCESS)
+            rc = mpi_fail(err, mrc, "send of the surface contacts", w->step);
+    }
+    *done = rc == CM_OK && flag;
+    d->surf_gathers += *done;
+    d->surf_early += *done && !wait;
+    w->prof.surf_gather += cm_now() - t0;
+    w->prof.wait_cpu += cm_thread_cpu_now() - c0;
+    return rc;
 }
 
 static void ctx_free(dist_ctx *d);
@@ -590,12 +639,20 @@ static void dist_release(dem_world *w)
     w->n_ghost_rows = 0;
 }
 
-static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_agree, dist_release, dist_surf_gather};
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo,  dist_agree,
+                                      dist_release, dist_surf_gather_begin, dist_surf_gather_end};
 
 static void ctx_free(dist_ctx *d)
 {
     if (!d)
         return;
+    if (d->surf_req != MPI_REQUEST_NULL) {
+        /* stopped by an error between a surface gather's begin and end: the
+         * message may still move, its buffers stay to the process's end
+         * (which MPI_Abort brings) */
+        MPI_Request_free(&d->surf_req);
+        d->psbuf = d->prbuf = NULL;
+    }
     free(d->bounds);
     free(d->costs);
     free(d->cols);
@@ -661,6 +718,7 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err)
     if (!d)
         return cm_fail(err, CM_ERR_NOMEM, "dem_mpi_attach: out of memory");
     d->comm = comm, d->rank = rank, d->size = size;
+    d->surf_req = MPI_REQUEST_NULL;
     d->bounds = calloc((size_t)size + 1, sizeof *d->bounds);
     d->costs = calloc((size_t)size, sizeof *d->costs);
     d->scount = calloc(9 * (size_t)size, sizeof *d->scount);
@@ -721,6 +779,7 @@ void dem_mpi_stats_get(const dem_world *w, dem_mpi_stats *s)
     s->cross_pairs = w->n_cross_pairs;
     s->surf_contacts = d->surf_contacts;
     s->surf_gathers = d->surf_gathers;
+    s->surf_early = d->surf_early;
     s->surf_doubles = d->surf_doubles;
     s->collects = d->collects;
 }

@@ -63,6 +63,7 @@ typedef struct dem_mpi_stats {
     long cross_pairs;    /* pairs owned–ghost in the current list */
     long surf_contacts;  /* grain–surface contacts of this rank's grains, summed over the steps */
     long surf_gathers;   /* surface passes gathered */
+    long surf_early;     /* of them, ended by a test among the grain pairs, before the wait after them */
     long surf_doubles;   /* rank 0: doubles of packed contacts it received, summed over the passes */
     long collects;       /* dem_mpi_collect calls (terrain window shifts) */
 } dem_mpi_stats;

@@ -544,17 +544,19 @@ static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *
     return n;
 }
 
-/* One thread: every active pair in ascending p (the plain loop). spring:
- * the history rows of the rolling spring (a constant: two instances). */
+/* One thread: the active pairs [k0, np) in ascending p (the plain loop).
+ * spring: the history rows of the rolling spring (a constant: two
+ * instances). Pairs are computed one by one, so where a walk starts and
+ * ends never changes a sum. */
 static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in, const force_sums *s,
-                                                           const coef_table *ct, batch_fn batch_forces, int np,
-                                                           const int spring)
+                                                           const coef_table *ct, batch_fn batch_forces, int k0,
+                                                           int np, const int spring)
 {
     const pair_arrays a = *in;
     pair_batch b;
     b.n = 0;
     int contacts = 0;
-    for (int k = 0; k < np;) {
+    for (int k = k0; k < np;) {
         k = fill(&a, &b, NULL, k, np, INT_MAX, spring);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
@@ -673,20 +675,44 @@ int dem_pairs_contacts(const dem_world *w, int p0, int p1)
     return contacts;
 }
 
+/* What every walk of the stage reads: the arrays, the grains' sums, the
+ * coefficients, the kernel. */
+typedef struct stage_in {
+    pair_arrays a;
+    force_sums s;
+    coef_table ct;
+    batch_fn bf;
+} stage_in;
+
+static void stage_in_of(dem_world *w, stage_in *in)
+{
+    dem_grains *g = &w->g;
+    in->a = pair_arrays_of(w);
+    in->s = (force_sums){g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
+    coef_table_fill(w, &in->ct);
+    in->bf = batch_kernel(w);
+}
+
+int dem_stage_pairs_part(dem_world *w, int p0, int p1)
+{
+    stage_in in;
+    stage_in_of(w, &in);
+    return in.a.roll_spring ? walk_all(&in.a, &in.s, &in.ct, in.bf, p0, p1, 1)
+                            : walk_all(&in.a, &in.s, &in.ct, in.bf, p0, p1, 0);
+}
+
 int dem_stage_pairs(dem_world *w)
 {
     if (w->n_shaped > 0)
         return stage_pairs_shaped(w);
     const int nt = w->n_threads;
-    const pair_arrays a = pair_arrays_of(w);
-    dem_grains *g = &w->g;
-    const force_sums s = {g->fx, g->fy, g->fz, g->tx, g->ty, g->tz};
-    coef_table ct;
-    coef_table_fill(w, &ct);
-    const batch_fn bf = batch_kernel(w);
     if (nt == 1)
-        return a.roll_spring ? walk_all(&a, &s, &ct, bf, w->n_active_pairs, 1)
-                             : walk_all(&a, &s, &ct, bf, w->n_active_pairs, 0);
+        return dem_stage_pairs_part(w, 0, w->n_active_pairs);
+    stage_in in;
+    stage_in_of(w, &in);
+    const pair_arrays a = in.a;
+    const force_sums s = in.s;
+    const batch_fn bf = in.bf;
     const dem_pair_plan *pl = &w->plan;
     const int nb = pl->n_blocks;
     int contacts = 0;
@@ -706,7 +732,7 @@ int dem_stage_pairs(dem_world *w)
 #pragma omp for schedule(dynamic, 1) nowait
 #endif
         for (int t = 0; t < nb; t++) /* phase B */
-            contacts += a.roll_spring ? walk_block(&a, &s, &ct, bf, pl, t, 1) : walk_block(&a, &s, &ct, bf, pl, t, 0);
+            contacts += a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1) : walk_block(&a, &s, &in.ct, bf, pl, t, 0);
     }
     return contacts;
 }

@@ -1,6 +1,9 @@
 /* The time step, a pipeline of named stages, each timed into w->prof
  * (dem_profile):
  *   surface    clear forces -> gravity -> walls -> triangle surface     (dem_step_surface)
+ *   surf_gather distributed run only: the ranks' surface contacts summed
+ *              on rank 0 (dem_mpi.c); begun here, ended here or, with
+ *              dem_step_surface_then, among the next stage's pairs
  *   pairs      grain–grain narrow phase over the neighbour list, each     (dem_step_grains)
  *              pair's force added into its grains in pair-list order, the
  *              same sums for any thread count (dem_pairs.c)
@@ -120,8 +123,36 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
     return contacts;
 }
 
-int dem_step_surface(dem_world *w, cm_error *err)
+/* Ends a pending surface gather if it can (wait: it must), then hands the
+ * pass to what waits for it. The seconds it took are added to *t (the
+ * gather's end also to stage surface). */
+static int surf_ready(dem_world *w, int wait, double *t, cm_error *err)
 {
+    const double t0 = cm_now();
+    int done = !w->surf_pending, rc = CM_OK;
+    if (!done) {
+        rc = w->dist->surf_gather_end(w, wait, &done, err);
+        w->prof.surface += cm_now() - t0;
+    }
+    if (rc == CM_OK && done) {
+        w->surf_pending = 0;
+        dem_surface_ready_fn fn = w->surf_ready;
+        w->surf_ready = NULL;
+        if (fn)
+            rc = fn(w, w->surf_ready_user, err);
+    }
+    *t += cm_now() - t0;
+    return rc;
+}
+
+static int surface_begin(dem_world *w, cm_error *err)
+{
+    double t_late = 0.0;
+    if (w->surf_pending) { /* a pass begun and never ended (no dem_step_grains since): ended first */
+        int rc = surf_ready(w, 1, &t_late, err);
+        if (rc)
+            return rc;
+    }
     if (!w->prepared) {
         int rc = dem_world_prepare(w, err);
         if (rc)
@@ -171,8 +202,29 @@ int dem_step_surface(dem_world *w, cm_error *err)
     int rc = CM_OK;
     if (w->surf)
         rc = dem_surface_contacts(w, err);
+    /* stage "surf_gather" begun: every rank's contacts to rank 0 */
+    if (rc == CM_OK && w->surf && w->dist && w->dist->surf_gather_begin &&
+        (rc = w->dist->surf_gather_begin(w, err)) == CM_OK)
+        w->surf_pending = 1;
     w->prof.surface += cm_now() - t0;
     return rc;
+}
+
+int dem_step_surface_then(dem_world *w, dem_surface_ready_fn fn, void *user, cm_error *err)
+{
+    int rc = surface_begin(w, err);
+    if (rc)
+        return rc;
+    w->surf_ready = fn, w->surf_ready_user = user;
+    double t = 0.0;
+    return w->surf_pending ? CM_OK : surf_ready(w, 1, &t, err);
+}
+
+int dem_step_surface(dem_world *w, cm_error *err)
+{
+    int rc = surface_begin(w, err);
+    double t = 0.0;
+    return rc == CM_OK && w->surf_pending ? surf_ready(w, 1, &t, err) : rc;
 }
 
 /* One grain's orientation: q <- (q + dt/2 (0, ω) q) / |...|, kept if the
@@ -388,20 +440,43 @@ int dem_step_grains(dem_world *w, cm_error *err)
 {
     if (!w->prepared)
         return cm_fail(err, CM_ERR_STATE, "dem_step_grains at step %ld before dem_step_surface", w->step);
+    int rc = CM_OK;
+    double t_out = 0.0; /* the surface gather's end and what it handed the pass to */
+    if (w->need_rebuild && w->surf_pending && (rc = surf_ready(w, 1, &t_out, err))) /* grains move: gather first */
+        return rc;
     double t0 = cm_now();
     if (w->need_rebuild || !w->plan.valid) {
-        int rc = w->need_rebuild ? rebuild(w, err) : dem_pair_plan_build(w, err);
+        rc = w->need_rebuild ? rebuild(w, err) : dem_pair_plan_build(w, err);
         if (rc)
             return rc;
         double t = cm_now();
         w->prof.rebuild += t - t0;
         t0 = t;
     }
-    w->contacts_gg = dem_stage_pairs(w);
+    /* a surface gather still on its way: ended as soon as it can be, tried
+     * between blocks of pairs (one thread, spheres) or after them */
+    const double t_out0 = t_out;
+    if (w->surf_pending && w->n_threads == 1 && w->n_shaped == 0) {
+        const int np = w->n_active_pairs;
+        double t_test = t0;
+        w->contacts_gg = 0;
+        for (int p0 = 0; p0 < np; p0 += DEM_PAIRS_BLOCK) {
+            const int p1 = np - p0 > DEM_PAIRS_BLOCK ? p0 + DEM_PAIRS_BLOCK : np;
+            w->contacts_gg += dem_stage_pairs_part(w, p0, p1);
+            if (w->surf_pending && cm_now() - t_test >= w->def.gather_test_every) {
+                if ((rc = surf_ready(w, 0, &t_out, err)))
+                    return rc;
+                t_test = cm_now();
+            }
+        }
+    } else
+        w->contacts_gg = dem_stage_pairs(w);
+    if (w->surf_pending && (rc = surf_ready(w, 1, &t_out, err)))
+        return rc;
     if (w->dist) /* a left ghost's pairs are counted by its owner (the ranks' counts add up to one process's) */
         w->contacts_gg -= dem_pairs_contacts(w, 0, w->n_ghost_rows);
     double t_pairs = cm_now();
-    w->prof.pairs += t_pairs - t0;
+    w->prof.pairs += t_pairs - t0 - (t_out - t_out0);
     t0 = t_pairs;
     double maxd2;
     int bad = stage_integrate(w, &maxd2);
@@ -414,11 +489,14 @@ int dem_step_grains(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_NUMERIC, "step %ld (t = %g s): grain %d has a non-finite position: the integration is unstable; reduce coupling.dt (dem.dt stand-alone)",
                        w->step, w->time, w->g.id[bad]);
     if (w->dist) { /* stage "halo": ghosts from their owners, the rebuild decided by all */
-        int any_bad = 0, rc = w->dist->halo(w, err);
+        const double c1 = cm_thread_cpu_now();
+        int any_bad = 0;
+        rc = w->dist->halo(w, err);
         if (rc == CM_OK)
             rc = w->dist->agree(w, &maxd2, &any_bad, err);
         double t = cm_now();
         w->prof.halo += t - t1;
+        w->prof.wait_cpu += cm_thread_cpu_now() - c1;
         t1 = t;
         if (rc)
             return rc;
@@ -428,7 +506,7 @@ int dem_step_grains(dem_world *w, cm_error *err)
     }
     const double half = 0.5 * w->skin;
     if (maxd2 > half * half) {
-        int rc = rebuild(w, err);
+        rc = rebuild(w, err);
         w->prof.rebuild += cm_now() - t1;
         if (rc)
             return rc;

@@ -1212,9 +1212,5 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
     if (overflow_slot >= 0)
         return cm_fail(err, CM_ERR_RANGE, "step %ld: grain %d: surface tree deeper than the search stack (64)", w->step,
                        g->id[overflow_slot]);
-    /* distributed: every rank's contacts summed on rank 0 in rank order,
-     * which is the grain order (dem_mpi.c, stage surf_gather) */
-    if (w->dist && w->dist->surf_gather)
-        return w->dist->surf_gather(w, err);
     return CM_OK;
 }

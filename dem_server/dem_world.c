@@ -36,6 +36,7 @@ dem_world_def dem_world_def_default(void)
     d.dt_safety_hertz = 0.1;
     d.allow_unstable = false;
     d.reorder_every = 1;
+    d.gather_test_every = 1.25e-4;
     return d;
 }
 
@@ -749,7 +750,11 @@ void dem_surface_totals(const dem_world *w, dem_surface_total *t)
 
 /* ---- diagnostics ------------------------------------------------------- */
 
-void dem_world_add_idle(dem_world *w, double seconds) { w->prof.idle += seconds; }
+void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds)
+{
+    w->prof.idle += seconds;
+    w->prof.wait_cpu += cpu_seconds;
+}
 
 long dem_world_steps(const dem_world *w) { return w->step; }
 

@@ -88,6 +88,10 @@ enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
  * threads): 4 blocks 1.0-1.4e7, 1 block 1.2e7 grain-steps/s, x slabs 0.55e7.
  * A Morton order of the grains would give compact slot ranges. */
 enum { DEM_PLAN_BLOCKS_PER_THREAD = 1 };
+/* A surface gather still on its way (dem_step.c) is tested between blocks
+ * of DEM_PAIRS_BLOCK pairs once dem_world_def.gather_test_every has passed
+ * since the last test. */
+enum { DEM_PAIRS_BLOCK = 1024 };
 
 typedef struct dem_pair_plan {
     int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
@@ -137,9 +141,12 @@ typedef struct dem_dist_ops {
     /* frees the distribution's own data (dem_world_destroy calls it) */
     void (*release)(dem_world *w);
     /* after every surface pass (dem_surface_contacts): the ranks' contacts
-     * gathered and summed on rank 0 (its node forces and totals then the
-     * whole surface's); NULL: each rank keeps its own */
-    int (*surf_gather)(dem_world *w, cm_error *err);
+     * on their way to rank 0 (begin), then taken as far as they have come,
+     * or all of them if wait (end: *done once rank 0 has summed them, its
+     * node forces and totals then the whole surface's); NULL: each rank
+     * keeps its own */
+    int (*surf_gather_begin)(dem_world *w, cm_error *err);
+    int (*surf_gather_end)(dem_world *w, int wait, int *done, cm_error *err);
 } dem_dist_ops;
 
 struct dem_world {
@@ -218,6 +225,12 @@ struct dem_world {
     double *wall_rec;
     int wall_rec_nw, wall_rec_grains;
 
+    /* a surface pass whose gather has not ended (dem_step_surface_then), and
+     * what is then to be done */
+    int surf_pending;
+    dem_surface_ready_fn surf_ready;
+    void *surf_ready_user;
+
     long step;
     double time;
     int prepared;
@@ -273,6 +286,9 @@ int dem_check_dt(dem_world *w, cm_error *err);
  * (forces and torques added into the grains; returns the contacts). */
 int dem_pair_plan_build(dem_world *w, cm_error *err);
 int dem_stage_pairs(dem_world *w);
+/* One thread, spheres only: the stage for the active pairs [p0, p1); the
+ * parts in order give the whole stage's bits. */
+int dem_stage_pairs_part(dem_world *w, int p0, int p1);
 /* Sphere pairs [p0, p1) of the list in contact, by the stage's own test. */
 int dem_pairs_contacts(const dem_world *w, int p0, int p1);
 /* dem_world.c: moves grain data so that slot k holds the grain previously in

@@ -14,8 +14,9 @@
 # added) and the run records byte for byte, every dataset of dem_grains.h5
 # (the ranks' grains gathered on rank 0), wheel.h5 and fem.h5 byte for byte.
 # So that the test could fail, the distributed runs must have moved grains
-# between ranks, found surface contacts on more than one rank, and shifted
-# the window (a removal and an appended stretch) while distributed.
+# between ranks, found surface contacts on more than one rank (the runs by
+# grain counts; by time the split follows the clock), and shifted the
+# window (a removal and an appended stretch) while distributed.
 # Usage: mpi_coupled.sh SOURCE_DIR BUILD_DIR [END]
 set -uo pipefail
 src=$1 build=$2 end=${3:-0.05}
@@ -53,7 +54,11 @@ for c in "${cases[@]}"; do
   [ "$moved" -gt 0 ] || { echo "$name: no grain migrated between ranks"; exit 1; }
   touching=$(sed -n 's/.*rank [0-9]* of [0-9]*: \([0-9]*\) surface contacts over.*/\1/p' "$work/$name.log" |
              awk '$1 > 0 {k++} END {print k + 0}')
-  [ "$touching" -gt 1 ] || { echo "$name: surface contacts on $touching rank(s), want more than one"; exit 1; }
+  # by grain counts the tire's contacts fall on more than one slab; by
+  # measured time the split follows the clock (a loaded core's rank may be
+  # left a sliver away from the tire), so there only the results count
+  [ "$name" = scene2 ] || [ "$touching" -gt 1 ] ||
+    { echo "$name: surface contacts on $touching rank(s), want more than one"; exit 1; }
   shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/$name.log")
   grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/$name.log" &&
     [ "${shifts:-0}" -gt 0 ] || { echo "$name: the window did not shift while distributed"; exit 1; }

@@ -11,6 +11,9 @@
  *   mpirun -np 2 test_dem_mpi same_bits_time  (slabs balanced by measured
  *                                              time, rank 1 made slow)
  *   mpirun -np 1 test_dem_mpi slab_bounds    (the slab split alone)
+ *   mpirun -np N test_dem_mpi surface_then   (registered for N = 2, 3: the
+ *                                              surface's node forces handed
+ *                                              on among the grain pairs)
  *
  * Every rank runs the case; the verdict is agreed (any rank failing fails
  * the run on rank 0 and the others). */
@@ -318,6 +321,154 @@ static int slab_bounds(void)
     return 0;
 }
 
+/* dem_step_surface_then: the grains fall onto a triangulated floor (a
+ * surface in place of the floor wall) spanning every slab. One process
+ * hands each pass's node forces and totals on at once; distributed, they
+ * are handed on among the next dem_step_grains' pairs, once the ranks'
+ * contacts are summed on rank 0 (tested after every block of pairs here,
+ * so that most passes end there rather than in the wait after them), and
+ * there they must be one process's, bit for bit, at every step; so must
+ * the final state. Every rank must see its callback exactly once per step,
+ * and surface contacts must come from more than one rank. */
+enum { FLOOR_NX = 16, FLOOR_NY = 4, FLOOR_STEPS = 600 };
+
+typedef struct floor_rec {
+    dem_world *w;
+    int calls, in_grains, during; /* callbacks, those inside dem_step_grains; during: in dem_step_grains now */
+    uint64_t *hash;               /* per step: the node forces' and totals' bits (rank 0) */
+    long step;
+} floor_rec;
+
+static uint64_t fnv(uint64_t h, const void *p, size_t n)
+{
+    const unsigned char *b = p;
+    for (size_t k = 0; k < n; k++)
+        h = (h ^ b[k]) * 1099511628211ULL;
+    return h;
+}
+
+static int floor_ready(dem_world *w, void *user, cm_error *err)
+{
+    (void)err;
+    floor_rec *r = user;
+    const int nn = (FLOOR_NX + 1) * (FLOOR_NY + 1);
+    dem_surface_total t;
+    dem_surface_totals(w, &t);
+    double tot[4] = {t.force[0], t.force[1], t.force[2], (double)t.contacts};
+    r->hash[r->step] = fnv(fnv(14695981039346656037ULL, dem_surface_node_forces(w), 3 * (size_t)nn * sizeof(double)),
+                           tot, sizeof tot);
+    r->calls++;
+    r->in_grains += r->during;
+    return CM_OK;
+}
+
+static int floor_world(int with_grains, dem_world **out)
+{
+    dem_material m = test_material(5e6, 0.3, 0.3, 0.5);
+    dem_world_def d = dem_world_def_default();
+    d.dt = 4e-5;
+    d.max_grains = N_GRAINS;
+    d.gravity[2] = -9.81;
+    d.gather_test_every = 0.0;
+    dem_world *w = NULL;
+    cm_error err = {0};
+    ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
+    *out = w;
+    const double L = 0.16, B = 0.04;
+    const double walls[4][6] = {{0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0}, {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
+    for (int k = 0; k < 4; k++)
+        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    double x[3 * (FLOOR_NX + 1) * (FLOOR_NY + 1)];
+    int tris[3 * 2 * FLOOR_NX * FLOOR_NY], nt = 0;
+    for (int j = 0; j <= FLOOR_NY; j++)
+        for (int i = 0; i <= FLOOR_NX; i++) {
+            double *p = x + 3 * (j * (FLOOR_NX + 1) + i);
+            p[0] = L * i / FLOOR_NX, p[1] = B * j / FLOOR_NY, p[2] = 0.0;
+        }
+    for (int j = 0; j < FLOOR_NY; j++)
+        for (int i = 0; i < FLOOR_NX; i++) {
+            const int a = j * (FLOOR_NX + 1) + i, b = a + 1, c = a + FLOOR_NX + 1, e = c + 1;
+            const int t2[6] = {a, b, e, a, e, c};
+            memcpy(tris + 3 * nt, t2, sizeof t2);
+            nt += 2;
+        }
+    const int nn = (FLOOR_NX + 1) * (FLOOR_NY + 1);
+    ENSURE_MSG(dem_surface_set(w, nn, x, nt, tris, 0, &err) == 0, "%s", err.msg);
+    if (!with_grains)
+        return 0;
+    dem_bed_params p = dem_bed_params_default();
+    double lo[3] = {0, 0, 0}, hi[3] = {L, B, 0.2};
+    memcpy(p.box_min, lo, sizeof lo);
+    memcpy(p.box_max, hi, sizeof hi);
+    p.n_layers = 1;
+    p.layers[0].count = N_GRAINS / 2;
+    p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
+    ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
+    return 0;
+}
+
+/* FLOOR_STEPS steps through dem_step_surface_then; r->hash filled. */
+static int floor_steps(dem_world *w, floor_rec *r)
+{
+    cm_error err = {0};
+    for (r->step = 0; r->step < FLOOR_STEPS; r->step++) {
+        ENSURE_MSG(dem_step_surface_then(w, floor_ready, r, &err) == 0, "rank %d: %s", g_rank, err.msg);
+        r->during = 1;
+        ENSURE_MSG(dem_step_grains(w, &err) == 0, "rank %d: %s", g_rank, err.msg);
+        r->during = 0;
+        ENSURE_MSG(r->calls == r->step + 1, "rank %d, step %ld: %d callbacks", g_rank, r->step, r->calls);
+    }
+    return 0;
+}
+
+static int surface_then(void)
+{
+    ENSURE(g_size > 1);
+    cm_error err = {0};
+    uint64_t want = 0, got = 0, *ref_hash = calloc(FLOOR_STEPS, sizeof *ref_hash),
+             *hash = calloc(FLOOR_STEPS, sizeof *hash);
+    ENSURE(ref_hash && hash);
+    dem_world *w = NULL;
+    if (g_rank == 0) {
+        floor_rec r = {.hash = ref_hash};
+        ENSURE(floor_world(1, &w) == 0);
+        ENSURE(floor_steps(w, &r) == 0);
+        ENSURE(r.in_grains == 0); /* one process: at once */
+        want = dem_world_hash(w);
+        dem_world_destroy(&w);
+    }
+    floor_rec r = {.hash = hash};
+    ENSURE(floor_world(g_rank == 0, &w) == 0);
+    ENSURE_MSG(dem_mpi_attach(w, MPI_COMM_WORLD, &err) == 0, "%s", err.msg);
+    ENSURE(floor_steps(w, &r) == 0);
+    ENSURE_MSG(dem_mpi_hash(w, &got, &err) == 0, "%s", err.msg);
+    dem_mpi_stats s;
+    dem_mpi_stats_get(w, &s);
+    int touching = s.surf_contacts > 0, ranks_touching = 0, same = 0;
+    long early = 0;
+    MPI_Allreduce(&touching, &ranks_touching, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);
+    MPI_Allreduce(&s.surf_early, &early, 1, MPI_LONG, MPI_SUM, MPI_COMM_WORLD);
+    if (g_rank == 0) {
+        for (int k = 0; k < FLOOR_STEPS; k++)
+            same += hash[k] == ref_hash[k];
+        printf("floor: %d of %d passes' node forces as one process's; callbacks in the grain step %d of %d; "
+               "gathers ended among the pairs %ld (all ranks); %d ranks with surface contacts (%ld here); state "
+               "hash: one process %016llx, %d ranks %016llx\n",
+               same, FLOOR_STEPS, r.in_grains, r.calls, early, ranks_touching, s.surf_contacts,
+               (unsigned long long)want, g_size, (unsigned long long)got);
+    }
+    fflush(stdout);
+    dem_mpi_detach(w);
+    dem_world_destroy(&w);
+    free(ref_hash);
+    free(hash);
+    ENSURE(r.in_grains == FLOOR_STEPS); /* distributed: handed on among the pairs (or after them) */
+    ENSURE(early > 0);                   /* and the tests among the pairs did end some */
+    ENSURE(ranks_touching > 1);
+    ENSURE(g_rank > 0 || (same == FLOOR_STEPS && got == want));
+    return 0;
+}
+
 /* The same with the rolling spring: its rotations travel in the springs'
  * records (migration) and come out of the same bits. */
 static int same_bits_spring(void)
@@ -330,7 +481,8 @@ static const test_case tests[] = {
     {"same_bits", same_bits},
     {"same_bits_spring", same_bits_spring},
     {"same_bits_time", same_bits_time},
-    {"slab_bounds", slab_bounds}};
+    {"slab_bounds", slab_bounds},
+    {"surface_then", surface_then}};
 
 /* A failing rank stops all of them (the others may wait in a collective). */
 int main(int argc, char **argv)

@@ -108,8 +108,8 @@ typedef struct dem_world_def {
                                  among the grain pairs (dem_step_surface_then); default 1.25e-4. A test costs
                                  a few us (MPI progress, a yield); testing seldom delays fem_server's step,
                                  which on two cores must overlap the other ranks' pairs: on the paper scene
-                                 on 2 ranks, tests every ~130 us ran 3 % faster than every ~35 us and 10 %
-                                 faster than every ~500 us (session 15). 0: after every block of pairs */
+                                 on 2 ranks, tests every ~500 us ran 0.90x as fast as every ~130 us, every
+                                 ~35 us 0.97x (within the noise; session 15). 0: after every block of pairs */
 } dem_world_def;
 
 dem_world_def dem_world_def_default(void);

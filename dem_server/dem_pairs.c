@@ -693,12 +693,29 @@ static void stage_in_of(dem_world *w, stage_in *in)
     in->bf = batch_kernel(w);
 }
 
-int dem_stage_pairs_part(dem_world *w, int p0, int p1)
+static int walk_part(const stage_in *in, int p0, int p1)
+{
+    return in->a.roll_spring ? walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 1)
+                             : walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 0);
+}
+
+int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *user), void *user, int *contacts)
 {
     stage_in in;
     stage_in_of(w, &in);
-    return in.a.roll_spring ? walk_all(&in.a, &in.s, &in.ct, in.bf, p0, p1, 1)
-                            : walk_all(&in.a, &in.s, &in.ct, in.bf, p0, p1, 0);
+    const int np = w->n_active_pairs;
+    int p0 = 0, more = 1;
+    *contacts = 0;
+    while (more > 0 && p0 < np) {
+        const int p1 = np - p0 > DEM_PAIRS_BLOCK ? p0 + DEM_PAIRS_BLOCK : np;
+        *contacts += walk_part(&in, p0, p1);
+        p0 = p1;
+        more = between(w, user);
+    }
+    if (more < 0)
+        return more;
+    *contacts += walk_part(&in, p0, np); /* the rest in one go */
+    return CM_OK;
 }
 
 int dem_stage_pairs(dem_world *w)
@@ -706,10 +723,10 @@ int dem_stage_pairs(dem_world *w)
     if (w->n_shaped > 0)
         return stage_pairs_shaped(w);
     const int nt = w->n_threads;
-    if (nt == 1)
-        return dem_stage_pairs_part(w, 0, w->n_active_pairs);
     stage_in in;
     stage_in_of(w, &in);
+    if (nt == 1)
+        return walk_part(&in, 0, w->n_active_pairs);
     const pair_arrays a = in.a;
     const force_sums s = in.s;
     const batch_fn bf = in.bf;

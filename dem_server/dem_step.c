@@ -426,6 +426,26 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     return bad;
 }
 
+/* Between blocks of the pair stage: the pending surface gather tested once
+ * gather_test_every has passed since the last test. */
+typedef struct gather_test {
+    double t_test; /* the last test (or the stage's start) */
+    double *t_out; /* surf_ready's seconds */
+    cm_error *err;
+} gather_test;
+
+static int test_gather(dem_world *w, void *user)
+{
+    gather_test *gt = user;
+    if (cm_now() - gt->t_test >= w->def.gather_test_every) {
+        int rc = surf_ready(w, 0, gt->t_out, gt->err);
+        if (rc)
+            return rc;
+        gt->t_test = cm_now();
+    }
+    return w->surf_pending;
+}
+
 /* Stage "rebuild": the neighbour list, in a distributed run after the
  * migration of grains between ranks (dem_mpi.c). */
 static int rebuild(dem_world *w, cm_error *err)
@@ -457,18 +477,9 @@ int dem_step_grains(dem_world *w, cm_error *err)
      * between blocks of pairs (one thread, spheres) or after them */
     const double t_out0 = t_out;
     if (w->surf_pending && w->n_threads == 1 && w->n_shaped == 0) {
-        const int np = w->n_active_pairs;
-        double t_test = t0;
-        w->contacts_gg = 0;
-        for (int p0 = 0; p0 < np; p0 += DEM_PAIRS_BLOCK) {
-            const int p1 = np - p0 > DEM_PAIRS_BLOCK ? p0 + DEM_PAIRS_BLOCK : np;
-            w->contacts_gg += dem_stage_pairs_part(w, p0, p1);
-            if (w->surf_pending && cm_now() - t_test >= w->def.gather_test_every) {
-                if ((rc = surf_ready(w, 0, &t_out, err)))
-                    return rc;
-                t_test = cm_now();
-            }
-        }
+        gather_test gt = {t0, &t_out, err};
+        if ((rc = dem_stage_pairs_between(w, test_gather, &gt, &w->contacts_gg)))
+            return rc;
     } else
         w->contacts_gg = dem_stage_pairs(w);
     if (w->surf_pending && (rc = surf_ready(w, 1, &t_out, err)))

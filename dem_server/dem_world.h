@@ -89,8 +89,8 @@ enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
  * A Morton order of the grains would give compact slot ranges. */
 enum { DEM_PLAN_BLOCKS_PER_THREAD = 1 };
 /* A surface gather still on its way (dem_step.c) is tested between blocks
- * of DEM_PAIRS_BLOCK pairs once dem_world_def.gather_test_every has passed
- * since the last test. */
+ * of DEM_PAIRS_BLOCK pairs (dem_stage_pairs_between) once
+ * dem_world_def.gather_test_every has passed since the last test. */
 enum { DEM_PAIRS_BLOCK = 1024 };
 
 typedef struct dem_pair_plan {
@@ -286,9 +286,11 @@ int dem_check_dt(dem_world *w, cm_error *err);
  * (forces and torques added into the grains; returns the contacts). */
 int dem_pair_plan_build(dem_world *w, cm_error *err);
 int dem_stage_pairs(dem_world *w);
-/* One thread, spheres only: the stage for the active pairs [p0, p1); the
- * parts in order give the whole stage's bits. */
-int dem_stage_pairs_part(dem_world *w, int p0, int p1);
+/* One thread, spheres only: the stage (the same bits), with between(w, user)
+ * called after each block of DEM_PAIRS_BLOCK pairs while it returns > 0;
+ * 0 ends the calls (the rest of the pairs walked in one go), < 0 is an
+ * error, returned with the stage unfinished. *contacts as dem_stage_pairs. */
+int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *user), void *user, int *contacts);
 /* Sphere pairs [p0, p1) of the list in contact, by the stage's own test. */
 int dem_pairs_contacts(const dem_world *w, int p0, int p1);
 /* dem_world.c: moves grain data so that slot k holds the grain previously in

@@ -66,16 +66,25 @@ static inline void test_plane_mesh(int nx, int ny, double s, double x0, double y
         }
 }
 
+/* The side walls of an L x B box (x, y from 0, material 0), and its floor
+ * z = 0 if floor. */
+static inline int test_box_walls(dem_world *w, double L, double B, int floor)
+{
+    cm_error err = {0};
+    const double walls[5][6] = {{0, 0, 0, 0, 0, 1}, {0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0},
+                                {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
+    for (int k = floor ? 0 : 1; k < 5; k++)
+        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    return 0;
+}
+
 /* An open box L x B (floor and four side walls, material 0) with n grains
  * placed, not settled, in two layers (radii 2.2-2.6 mm below, 1.8-2.0 mm
  * above): the falling beds of the thread and rank tests. */
 static inline int test_two_layer_box(dem_world *w, double L, double B, int n)
 {
     cm_error err = {0};
-    const double walls[5][6] = {{0, 0, 0, 0, 0, 1}, {0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0},
-                                {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
-    for (int k = 0; k < 5; k++)
-        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    ENSURE(test_box_walls(w, L, B, 1) == 0);
     dem_bed_params p = dem_bed_params_default();
     double lo[3] = {0, 0, 0}, hi[3] = {L, B, 0.2};
     memcpy(p.box_min, lo, sizeof lo);

@@ -375,9 +375,7 @@ static int floor_world(int with_grains, dem_world **out)
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
     *out = w;
     const double L = 0.16, B = 0.04;
-    const double walls[4][6] = {{0, 0, 0, 1, 0, 0}, {L, 0, 0, -1, 0, 0}, {0, 0, 0, 0, 1, 0}, {0, B, 0, 0, -1, 0}};
-    for (int k = 0; k < 4; k++)
-        ENSURE(dem_wall_add(w, walls[k], walls[k] + 3, 0, &err) == 0);
+    ENSURE(test_box_walls(w, L, B, 0) == 0); /* the floor is the surface */
     double x[3 * (FLOOR_NX + 1) * (FLOOR_NY + 1)];
     int tris[3 * 2 * FLOOR_NX * FLOOR_NY], nt = 0;
     for (int j = 0; j <= FLOOR_NY; j++)

@@ -53,16 +53,24 @@ int cm_csv_create(const char *path, const char *const *columns, int ncols, cm_cs
     return CM_OK;
 }
 
-int cm_csv_row(cm_csv *c, const double *values, cm_error *err)
+int cm_csv_rows(cm_csv *c, const double *values, long nrows, cm_error *err)
 {
     if (!c || !c->fp)
         return cm_fail(err, CM_ERR_STATE, "csv: row written to a closed file");
-    for (int i = 0; i < c->ncols; i++)
-        fprintf(c->fp, "%s%.17g", i ? "," : "", values[i]);
-    fputc('\n', c->fp);
+    for (long r = 0; r < nrows; r++, values += c->ncols) {
+        for (int i = 0; i < c->ncols; i++)
+            fprintf(c->fp, "%s%.17g", i ? "," : "", values[i]);
+        fputc('\n', c->fp);
+    }
     if (fflush(c->fp) != 0 || ferror(c->fp))
-        return cm_fail(err, CM_ERR_IO, "writing a row to csv file %s: %s", c->path, strerror(errno));
+        return cm_fail(err, CM_ERR_IO, "writing %s to csv file %s: %s", nrows == 1 ? "a row" : "rows", c->path,
+                       strerror(errno));
     return CM_OK;
+}
+
+int cm_csv_row(cm_csv *c, const double *values, cm_error *err)
+{
+    return cm_csv_rows(c, values, 1, err);
 }
 
 int cm_csv_close(cm_csv **cp, cm_error *err)

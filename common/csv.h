@@ -3,8 +3,9 @@
  * `pandas.read_csv` / `numpy.loadtxt(skiprows=1, delimiter=",")` read back
  * the very numbers that were written.
  *
- * Every row is flushed to the operating system before cm_csv_row returns: a
- * process killed later leaves every complete row in the file. */
+ * Every row is flushed to the operating system before cm_csv_row (or
+ * cm_csv_rows) returns: a process killed later leaves every complete row in
+ * the file. */
 #ifndef CM_CSV_H
 #define CM_CSV_H
 
@@ -24,6 +25,9 @@ int cm_csv_reopen(const char *path, int ncols, long rows, cm_csv **out, cm_error
 
 /* Appends one row of ncols values and flushes it. */
 int cm_csv_row(cm_csv *c, const double *values, cm_error *err);
+
+/* Appends nrows rows (values row after row, ncols each) and flushes once. */
+int cm_csv_rows(cm_csv *c, const double *values, long nrows, cm_error *err);
 
 /* Closes the file and sets *c to NULL (no-op on NULL). Fails if the final
  * close reports a write error. */

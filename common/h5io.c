@@ -332,6 +332,11 @@ int cm_h5_close(cm_h5 **fp, cm_error *err)
         return CM_OK;
     cm_h5 *f = *fp;
     int rc = CM_OK;
+    int held = 0;
+    for (cm_h5_series *s = f->series; s; s = s->next)
+        held |= s->n_held > 0;
+    if (held) /* the rows a series still holds */
+        rc = cm_h5_flush(f, err);
     while (f->series) {
         cm_h5_series *s = f->series;
         f->series = s->next;
@@ -340,8 +345,7 @@ int cm_h5_close(cm_h5 **fp, cm_error *err)
             rc = cm_fail(err, e2.code, "%s", e2.msg);
         H5Dclose(s->dset);
         H5Tclose(s->memtype);
-        free(s->path);
-        free(s);
+        h5io_series_free(s);
     }
     if (f->gid >= 0)
         H5Gclose(f->gid);
@@ -356,9 +360,14 @@ int cm_h5_close(cm_h5 **fp, cm_error *err)
 
 int cm_h5_flush(cm_h5 *f, cm_error *err)
 {
-    if (H5Fflush(f->fid, H5F_SCOPE_LOCAL) < 0)
-        return h5io_fail(err, f->path, "flushing results file");
-    return CM_OK;
+    int rc = CM_OK;
+    for (cm_h5_series *s = f->series; s && rc == CM_OK; s = s->next)
+        rc = h5io_series_write_held(s, err);
+    if (rc == CM_OK && H5Fflush(f->fid, H5F_SCOPE_LOCAL) < 0)
+        rc = h5io_fail(err, f->path, "flushing results file");
+    for (cm_h5_series *s = f->series; s && rc == CM_OK; s = s->next)
+        rc = h5io_series_csv_held(s, err);
+    return rc;
 }
 
 const char *cm_h5_path(const cm_h5 *f)

@@ -54,10 +54,24 @@ struct cm_h5_series {
     char *path;
     hid_t dset, memtype;
     int ncols;
-    long rows;
+    long rows; /* rows in the dataset */
     cm_csv *csv;
     cm_h5_series *next;
+    /* appended rows not yet in the files (cm_h5_series_hold): n_held rows
+     * of ncols, the first h5_done of them already in the dataset */
+    double *held;
+    long n_held, h5_done, max_held; /* max_held <= 1: every row written by its append */
+    double hold_s, t_written;       /* hold at most hold_s of wall time since t_written */
 };
+
+/* The held rows of s into its dataset (the file not flushed). */
+int h5io_series_write_held(cm_h5_series *s, cm_error *err);
+
+/* ...then, once the file is flushed, into the CSV: no longer held. */
+int h5io_series_csv_held(cm_h5_series *s, cm_error *err);
+
+/* Frees a series' memory (its HDF5 objects and CSV are closed by the caller). */
+void h5io_series_free(cm_h5_series *s);
 
 struct cm_h5 {
     char *path, *xmf_path;

@@ -124,6 +124,9 @@ typedef struct fem_config {
     int power_iterations;    /* for the stable step: 300 */
     char output_dir[512];    /* results folder ("" = no output) */
     int output_every;        /* snapshot every N calls of fem_advance (0 = none) */
+    double series_flush;     /* s of wall time: a coupled run's traction.csv and wheel.h5:/series rows
+                                written in blocks at least this often, and at each checkpoint and the
+                                end (0 = every row at once): 1 */
     int check_every;         /* energy guard every N calls of fem_advance, elements every 10 N (0 = never): 10 */
     double max_strain;       /* element guard: largest |strain component| accepted: 0.5 */
     double interface_mass_min; /* kg: interface nodes lighter than this are given this mass (selective mass

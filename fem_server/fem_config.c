@@ -45,6 +45,10 @@
  *                               # H < 2 sqrt(m / (k_c + k_node)); the added mass is logged and
  *                               # written to fem_run.json (added_mass, added_mass_fraction)
  *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
+ *   output = { series_flush = 1.0; };  # s of wall time, optional: a coupled run's traction.csv
+ *                               # and wheel.h5:/series rows are written in blocks at least this
+ *                               # often, at every checkpoint and at the end (0: each row at once;
+ *                               # a flush per row costs ~0.1 ms of the FEM's ~0.6 ms exchange)
  *   # Supports and dead loads by set (optional; sets: rim, cavity, contact, and the planes of the
  *   # mesh's bounding box xmin, xmax, ymin, ymax, zmin, zmax). Without supports the rim is clamped.
  *   supports = ( { set = "xmin"; fix = "x"; },                 # roller / symmetry plane
@@ -81,6 +85,7 @@ fem_config fem_config_default(void)
     c.gravity[2] = -9.81;
     c.power_iterations = 300;
     c.check_every = 10;
+    c.series_flush = 1.0;
     c.max_strain = 0.5;
     return c;
 }
@@ -249,6 +254,7 @@ int fem_config_read(cm_scene *s, fem_config *c, cm_error *err)
         snprintf(c->output_dir, sizeof c->output_dir, "%s", dir);
     }
     TRY(read_int_opt(s, "fem.output.every", 0, 1000000000, 0, &c->output_every, err));
+    TRY(cm_scene_double_opt(s, "fem.output.series_flush", 0.0, 1e9, c->series_flush, &c->series_flush, err));
     TRY(read_int_opt(s, "fem.check_every", 0, 1000000000, c->check_every, &c->check_every, err));
     TRY(cm_scene_double_opt(s, "fem.max_strain", 1e-6, 100.0, c->max_strain, &c->max_strain, err));
     TRY(cm_scene_double_opt(s, "fem.interface_mass_min", 0.0, 1e3, 0.0, &c->interface_mass_min, err));

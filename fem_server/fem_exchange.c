@@ -395,6 +395,9 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
     if (c->ds.phase == DRIVE_TRAVEL && series_push(&c->travel, travel_row))
         return cm_fail(err, CM_ERR_NOMEM, "out of memory recording the traction series at exchange %ld", c->n);
     if (x->checkpoint) {
+        /* the rows the checkpoint counts are in the files before it is */
+        if ((rc = cm_h5_series_flush(c->series, err)))
+            return rc;
         series_buf *tv = &c->travel;
         fem_ckpt_run cr = {.exchange = c->n, .drive = &c->ds, .w_fem = c->w_fem,
                            .max_force_mismatch = c->max_force_mismatch, .max_moment_mismatch = c->max_moment_mismatch,

@@ -388,6 +388,9 @@ static int run(const options *o)
                      (rc = cm_h5_series_create(h5, "/series", fem_series_columns, fem_series_ncols, csv, &c.series,
                                                &err))))
         goto fail;
+    /* rows in blocks (at most 4096, ~0.7 MB); stage record flushes them before a checkpoint */
+    if (cfg.series_flush > 0 && (rc = cm_h5_series_hold(c.series, 4096, cfg.series_flush, &err)))
+        goto fail;
 
     /* The exchange loop: one fem_exchange() per exchange until the DEM
      * finishes the run (fem_exchange.c has the stages). */

@@ -664,6 +664,73 @@ static int durability_after_sigkill(void)
  * to continue after step 10 and row 3 keeps exactly those, lists them again
  * in the XDMF, and continues with step 30 and a 4th row; typed arrays read
  * back bit for bit and a wrong shape or type is refused. */
+/* Held rows (cm_h5_series_hold): a child holds blocks of HOLD_ROWS, appends
+ * HELD_N rows and then, by `how`, dies at once (0), after
+ * cm_h5_series_flush (1), or closes the file (2). What reached the files:
+ * the whole blocks only, or every row. */
+enum { HOLD_ROWS = 4, HELD_N = 10 };
+
+static void held_child(const char *path, const char *csv, int how)
+{
+    cm_error err = {0};
+    cm_h5_def def = cm_h5_default_def();
+    cm_h5 *f;
+    static const char *const cols[] = {"t", "KE"};
+    cm_h5_series *s;
+    if (cm_h5_create(path, &def, &f, &err) != CM_OK || cm_h5_series_create(f, "/series", cols, 2, csv, &s, &err) ||
+        cm_h5_series_hold(s, HOLD_ROWS, 1e9, &err)) /* never by time: the test must not depend on the clock */
+        _exit(3);
+    for (int r = 0; r < HELD_N; r++) {
+        double row[2] = {kill_row(r, 0), kill_row(r, 1)};
+        if (cm_h5_series_append(s, row, &err) != CM_OK || cm_h5_series_rows(s) != r + 1)
+            _exit(4);
+    }
+    if (how == 1 && cm_h5_series_flush(s, &err) != CM_OK)
+        _exit(5);
+    if (how == 2)
+        _exit(cm_h5_close(&f, &err) == CM_OK ? 0 : 6);
+    raise(SIGKILL);
+    _exit(8);
+}
+
+static int held_rows_reach_the_files_in_blocks(void)
+{
+    ENSURE(scratch());
+    static const char *const cols[] = {"t", "KE"};
+    double want[HELD_N * 2];
+    for (int r = 0; r < HELD_N; r++)
+        want[2 * r] = kill_row(r, 0), want[2 * r + 1] = kill_row(r, 1);
+    for (int how = 0; how < 3; how++) {
+        char path[128], csv[128];
+        in_scratch(path, sizeof path, "held.h5");
+        in_scratch(csv, sizeof csv, "held.csv");
+        fflush(NULL);
+        pid_t pid = fork();
+        ENSURE(pid >= 0);
+        if (pid == 0)
+            held_child(path, csv, how);
+        int status = 0;
+        ENSURE(waitpid(pid, &status, 0) == pid);
+        ENSURE_MSG(how == 2 ? WIFEXITED(status) && WEXITSTATUS(status) == 0
+                            : WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL,
+                   "case %d: child status %d", how, status);
+        /* killed holding rows: the two whole blocks; flushed or closed: all */
+        const hsize_t expect = how == 0 ? HELD_N / HOLD_ROWS * HOLD_ROWS : HELD_N;
+        hid_t fid = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+        ENSURE_MSG(fid >= 0, "case %d: the file does not open", how);
+        double back[HELD_N * 2];
+        hsize_t n = 0;
+        int bad = read_series(fid, "/series", cols, 2, NULL, &n) || n != expect ||
+                  read_series(fid, "/series", cols, 2, back, &n) || memcmp(back, want, n * 2 * sizeof *back) != 0;
+        H5Fclose(fid);
+        ENSURE_MSG(!bad, "case %d: %llu rows in the HDF5 file, want %llu of the appended ones", how,
+                   (unsigned long long)n, (unsigned long long)expect);
+        ENSURE_MSG(check_csv(csv, "t,KE", want, (long)expect, 2) == 0, "case %d: the CSV", how);
+    }
+    scratch_remove();
+    return 0;
+}
+
 static int reopen_cuts_back_and_continues(void)
 {
     ENSURE(scratch());
@@ -1036,6 +1103,7 @@ int main(int argc, char **argv)
         {"unwritable_path_names_path", unwritable_path_names_path},
         {"xdmf_well_formed", xdmf_well_formed},
         {"durability_after_sigkill", durability_after_sigkill},
+        {"held_rows_reach_the_files_in_blocks", held_rows_reach_the_files_in_blocks},
         {"reopen_cuts_back_and_continues", reopen_cuts_back_and_continues},
         {"resume_after_kill_at_every_write", resume_after_kill_at_every_write},
         {"rebuild_numbered_root_groups", rebuild_numbered_root_groups},

@@ -17,11 +17,17 @@
 # between ranks, found surface contacts on more than one rank (the runs by
 # grain counts; by time the split follows the clock), and shifted the
 # window (a removal and an appended stretch) while distributed.
+# Last, the scene asking for 2 ranks again with one busy loop per core beside
+# it: ./run must see the other processes and run one process instead (the
+# same results), and DEMFEM_LOAD_CHECK=0 (set for the cases above, which
+# ctest may run beside other tests) must keep the scene's ranks.
 # Usage: mpi_coupled.sh SOURCE_DIR BUILD_DIR [END]
 set -uo pipefail
 src=$1 build=$2 end=${3:-0.05}
 work=$(mktemp -d /tmp/demfem_mpi_coupled_XXXXXX)
-trap 'rm -rf "$work"' EXIT
+burners=()
+trap '[ ${#burners[@]} -eq 0 ] || kill "${burners[@]}" 2>/dev/null; rm -rf "$work"' EXIT
+export DEMFEM_LOAD_CHECK=0
 run() { # NAME [--ranks N]
   local name=$1; shift
   DEMFEM_NO_BUILD=1 DEMFEM_BUILD_DIR=$build "$src/run" "$src/tests/coupling/scenes/tire_window.cfg" \
@@ -64,5 +70,20 @@ for c in "${cases[@]}"; do
     [ "${shifts:-0}" -gt 0 ] || { echo "$name: the window did not shift while distributed"; exit 1; }
   "$src/tests/coupling/same_results.sh" "$work/one" "$work/$name" || { echo "$name: results differ"; exit 1; }
 done
-echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks" \
-     "and for the scene's 2 ranks balanced by time"
+# The scene's ranks beside busy loops (one per core): one process.
+for k in $(seq "$(nproc)"); do
+  bash -c 'while :; do :; done' &
+  burners+=($!)
+done
+DEMFEM_LOAD_CHECK=1 run busy --set dem.ranks=2 --set dem.balance=time
+kill "${burners[@]}" 2>/dev/null
+wait "${burners[@]}" 2>/dev/null
+burners=()
+grep -q 'the scene asks for 2 DEM ranks (dem.ranks), but [1-9][0-9]* other process(es) are running here: one process' \
+  "$work/busy.log" || { echo "busy: ./run did not give the scene's ranks up beside busy loops"; exit 1; }
+! grep -q 'DEM on 2 MPI ranks' "$work/busy.log" || { echo "busy: the DEM ran on 2 ranks"; exit 1; }
+read -r dem fem < "$work/busy.hash"
+[ "$dem" = "$dem1" ] && [ "$fem" = "$fem1" ] || { echo "busy: the final states differ"; exit 1; }
+"$src/tests/coupling/same_results.sh" "$work/one" "$work/busy" || { echo "busy: results differ"; exit 1; }
+echo "the coupled tire with a shifting window: same final states and result files for 1, 2 and 3 DEM ranks," \
+     "for the scene's 2 ranks balanced by time, and for one process in their place beside busy loops"

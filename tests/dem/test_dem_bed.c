@@ -450,11 +450,33 @@ static int settle_friction(void)
     return 0;
 }
 
+/* A bed with no layers (or only empty ones) is refused with a reason that
+ * names the layers, not as a failed allocation of 0 grains. */
+static int no_layers_refused(void)
+{
+    dem_world *w = bed_world(100, 1);
+    ENSURE(w);
+    for (int variant = 0; variant < 2; variant++) {
+        dem_bed_params p = small_bed(100);
+        if (variant == 0)
+            p.n_layers = 0;
+        else
+            p.layers[0].count = p.layers[1].count = 0;
+        cm_error err = {0};
+        int rc = dem_bed_place(w, &p, &err);
+        ENSURE_MSG(rc == CM_ERR_RANGE && strstr(err.msg, "dem.bed.layers") && !strstr(err.msg, "memory"),
+                   "variant %d: %d %s", variant, rc, err.msg);
+    }
+    dem_world_destroy(&w);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"settled_bed", settled_bed}, {"determinism", determinism}, {"bed_cache", bed_cache},
     {"settled_equals_cached", settled_equals_cached},
     {"other_code_refused", other_code_refused},
     {"output_files", output_files}, {"config_read", config_read}, {"settle_friction", settle_friction},
+    {"no_layers_refused", no_layers_refused},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -44,8 +44,8 @@
  *                               # k_c on a node of mass m exchanged every H s is stable for
  *                               # H < 2 sqrt(m / (k_c + k_node)); the added mass is logged and
  *                               # written to fem_run.json (added_mass, added_mass_fraction)
- *   output = { dir = "out/fem"; every = 100; };  # snapshot every N exchanges (optional)
- *   output = { series_flush = 1.0; };  # s of wall time, optional: a coupled run's traction.csv
+ *   output = { dir = "out/fem"; every = 100;  # snapshot every N exchanges (optional)
+ *              series_flush = 1.0; };        # s of wall time (optional): a coupled run's traction.csv
  *                               # and wheel.h5:/series rows are written in blocks at least this
  *                               # often, at every checkpoint and at the end (0: each row at once;
  *                               # a flush per row costs ~0.1 ms of the FEM's ~0.6 ms exchange)

@@ -111,12 +111,6 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
 {
     if (w->g.n != 0)
         return cm_fail(err, CM_ERR_STATE, "bed: the world already holds %d grains", w->g.n);
-    long wanted = 0;
-    for (int k = 0; k < p->n_layers; k++)
-        wanted += p->layers[k].count > 0 ? p->layers[k].count : 0;
-    if (wanted == 0)
-        return cm_fail(err, CM_ERR_RANGE, "bed: no grains to place (%d layers, none with a count > 0): give "
-                       "dem.bed.layers at least one layer with a count", p->n_layers);
     double lx = p->box_max[0] - p->box_min[0], ly = p->box_max[1] - p->box_min[1];
     double rmax = 0.0, total_h = 0.0;
     double hl[DEM_MAX_LAYERS];
@@ -141,6 +135,9 @@ int dem_bed_place(dem_world *w, const dem_bed_params *p, cm_error *err)
             return cm_fail(err, CM_ERR_RANGE, "bed layer %d: grains of radius %g m do not fit the %g x %g m box", k,
                            L->radius[1], lx, ly);
     }
+    if (total <= 0)
+        return cm_fail(err, CM_ERR_RANGE, "bed: no grains to place (%d layers, none with a count > 0): give "
+                       "dem.bed.layers at least one layer with a count", p->n_layers);
     if (total > w->g.cap)
         return cm_fail(err, CM_ERR_RANGE, "bed: %ld grains but the world holds at most %d", total, w->g.cap);
     /* placement grid: cells of 2 rmax, a linked list per cell */

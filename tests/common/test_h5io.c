@@ -572,8 +572,23 @@ static double kill_row(int r, int k)
     return k == 0 ? r * 1e-5 : val(r, k);
 }
 
+/* Runs child(path, csv, arg) in a forked process (which must end by
+ * _exit or a signal); its wait status, or -1. */
+static int child_status(void (*child)(const char *, const char *, long), const char *path, const char *csv,
+                        long arg)
+{
+    fflush(NULL);
+    pid_t pid = fork();
+    if (pid < 0)
+        return -1;
+    if (pid == 0)
+        child(path, csv, arg);
+    int status = 0;
+    return waitpid(pid, &status, 0) == pid ? status : -1;
+}
+
 /* Child: writes steps and rows, starts one more step and then dies. */
-static void kill_child(const char *path, const char *csv)
+static void kill_child(const char *path, const char *csv, long unused)
 {
     cm_error err = {0};
     cm_h5_def def = cm_h5_default_def();
@@ -618,13 +633,8 @@ static int durability_after_sigkill(void)
     in_scratch(path, sizeof path, "killed.h5");
     in_scratch(csv, sizeof csv, "killed.csv");
     in_scratch(xmf, sizeof xmf, "killed.xmf");
-    fflush(NULL);
-    pid_t pid = fork();
-    ENSURE(pid >= 0);
-    if (pid == 0)
-        kill_child(path, csv);
-    int status = 0;
-    ENSURE(waitpid(pid, &status, 0) == pid);
+    int status = child_status(kill_child, path, csv, 0);
+    ENSURE(status != -1);
     ENSURE_MSG(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL, "child status %d", status);
 
     enum { NR = KILL_STEPS * ROWS_PER_STEP };
@@ -660,17 +670,13 @@ static int durability_after_sigkill(void)
     return 0;
 }
 
-/* Resuming: a file with steps 0, 10, 20 and 5 series rows (+ CSV) reopened
- * to continue after step 10 and row 3 keeps exactly those, lists them again
- * in the XDMF, and continues with step 30 and a 4th row; typed arrays read
- * back bit for bit and a wrong shape or type is refused. */
 /* Held rows (cm_h5_series_hold): a child holds blocks of HOLD_ROWS, appends
  * HELD_N rows and then, by `how`, dies at once (0), after
  * cm_h5_series_flush (1), or closes the file (2). What reached the files:
  * the whole blocks only, or every row. */
 enum { HOLD_ROWS = 4, HELD_N = 10 };
 
-static void held_child(const char *path, const char *csv, int how)
+static void held_child(const char *path, const char *csv, long how)
 {
     cm_error err = {0};
     cm_h5_def def = cm_h5_default_def();
@@ -704,13 +710,8 @@ static int held_rows_reach_the_files_in_blocks(void)
         char path[128], csv[128];
         in_scratch(path, sizeof path, "held.h5");
         in_scratch(csv, sizeof csv, "held.csv");
-        fflush(NULL);
-        pid_t pid = fork();
-        ENSURE(pid >= 0);
-        if (pid == 0)
-            held_child(path, csv, how);
-        int status = 0;
-        ENSURE(waitpid(pid, &status, 0) == pid);
+        int status = child_status(held_child, path, csv, how);
+        ENSURE(status != -1);
         ENSURE_MSG(how == 2 ? WIFEXITED(status) && WEXITSTATUS(status) == 0
                             : WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL,
                    "case %d: child status %d", how, status);
@@ -731,6 +732,10 @@ static int held_rows_reach_the_files_in_blocks(void)
     return 0;
 }
 
+/* Resuming: a file with steps 0, 10, 20 and 5 series rows (+ CSV) reopened
+ * to continue after step 10 and row 3 keeps exactly those, lists them again
+ * in the XDMF, and continues with step 30 and a 4th row; typed arrays read
+ * back bit for bit and a wrong shape or type is refused. */
 static int reopen_cuts_back_and_continues(void)
 {
     ENSURE(scratch());
@@ -962,13 +967,8 @@ static int resume_after_kill_at_every_write(void)
         in_scratch(path, sizeof path, name);
         snprintf(name, sizeof name, "k%03ld.csv", n);
         in_scratch(csv, sizeof csv, name);
-        fflush(NULL);
-        pid_t pid = fork();
-        ENSURE(pid >= 0);
-        if (pid == 0)
-            rs_child(path, csv, n);
-        int status = 0;
-        ENSURE(waitpid(pid, &status, 0) == pid);
+        int status = child_status(rs_child, path, csv, n);
+        ENSURE(status != -1);
         if (WIFEXITED(status) && WEXITSTATUS(status) == 0)
             break; /* n is past the last write: every kill point was tried */
         ENSURE_MSG(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL, "kill point %ld: child status %d", n, status);

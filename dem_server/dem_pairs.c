@@ -14,8 +14,10 @@
  *              merged by p (phase B), so that each grain adds its
  *              contributions in ascending p, as the single loop does.
  * The result is bit-identical for any thread count; only the few pairs
- * across a block boundary are stored. Blocks go to whichever thread is free
- * (DEM_PLAN_BLOCKS_PER_THREAD, dem_world.h, says how many there are). */
+ * across a block boundary are stored. The list holds rows in slot order, so
+ * a block's own pairs are a contiguous range of p. A thread takes its own
+ * blocks first, then any left (block_claim; DEM_PLAN_BLOCKS_PER_THREAD,
+ * dem_world.h, says how many there are). */
 #include <limits.h>
 #include <math.h>
 #include <stdint.h>
@@ -134,24 +136,34 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
     dem_pair_plan *pl = &w->plan;
     const int n = w->g.n, np = w->n_active_pairs;
     const int nt = w->n_threads == 1 ? 1 : DEM_PLAN_BLOCKS_PER_THREAD * w->n_threads; /* blocks */
+    const int *pi = w->pi, *pj = w->pj;
     pl->valid = 0;
     pl->n_blocks = nt;
     if (nt == 1 || n == 0) { /* one thread: the plain loop, no plan needed */
         pl->valid = 1;
         return CM_OK;
     }
-    int *cnt = pl->count; /* 3 * (nt + 1): own, cross, incoming per block */
+    /* The list holds rows in slot order (i ascending, every j > i:
+     * dem_grid.c), so a block's own pairs are the range of p whose i lies
+     * in it, and a pair's j lies in its own block or a later one. */
+    int *own_start = pl->own_start, *cross_start = pl->cross_start, *in_start = pl->in_start;
+    int *cnt = pl->count; /* 3 * (nt + 1): cross and incoming per block, then cursors */
     memset(cnt, 0, 3 * ((size_t)nt + 1) * sizeof *cnt);
+    int *ccnt = cnt, *icnt = cnt + nt + 1;
     int n_cross = 0;
-    for (int p = 0; p < np; p++) {
-        int ti = owner(w->pi[p], n, nt), tj = owner(w->pj[p], n, nt);
-        cnt[ti]++;
-        if (ti != tj)
-            n_cross++;
+    for (int t = 0, p = 0; t < nt; t++) {
+        own_start[t] = p;
+        const int hi = block_lo(t + 1, n, nt);
+        for (; p < np && pi[p] < hi; p++) {
+            const int tj = pj[p] < hi ? t : owner(pj[p], n, nt);
+            if (tj != t)
+                ccnt[t]++, icnt[tj]++, n_cross++;
+        }
+        own_start[t + 1] = p;
     }
-    if (dem_grow_ints(&pl->own, &pl->own_cap, np) || dem_grow_ints(&pl->cross, &pl->cross_cap, n_cross) ||
-        dem_grow_ints(&pl->in, &pl->in_cap, n_cross))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the pair plan (%d pairs)", w->step, np);
+    if (dem_grow_ints(&pl->cross, &pl->cross_cap, n_cross) || dem_grow_ints(&pl->in, &pl->in_cap, n_cross))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the pair plan (%d cross pairs)", w->step,
+                       n_cross);
     if (n_cross > pl->cf_cap) {
         int c = pl->cf_cap ? pl->cf_cap : 256;
         while (c < n_cross)
@@ -167,54 +179,24 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
                            n_cross);
         pl->cf_cap = c;
     }
-    /* own lists: pairs grouped by block of i, ascending p inside */
-    int *own_start = pl->own_start, *cross_start = pl->cross_start, *in_start = pl->in_start;
-    own_start[0] = 0;
-    for (int t = 0; t < nt; t++)
-        own_start[t + 1] = own_start[t] + cnt[t];
-    memset(cnt, 0, ((size_t)nt + 1) * sizeof *cnt); /* cursors */
-    int *ccnt = cnt + nt + 1, *icnt = cnt + 2 * (nt + 1);
-    for (int p = 0; p < np; p++) {
-        int ti = owner(w->pi[p], n, nt), tj = owner(w->pj[p], n, nt);
-        pl->own[own_start[ti] + cnt[ti]++] = p;
-        if (ti != tj)
-            ccnt[ti]++, icnt[tj]++;
-    }
     cross_start[0] = in_start[0] = 0;
     for (int t = 0; t < nt; t++) {
         cross_start[t + 1] = cross_start[t] + ccnt[t];
         in_start[t + 1] = in_start[t] + icnt[t];
     }
-    /* cross pairs grouped by the block of i; incoming lists by the block of
-     * j; both in ascending p (the own lists are, and blocks are visited in
-     * order for the incoming ones) */
-    memset(ccnt, 0, 2 * ((size_t)nt + 1) * sizeof *ccnt);
-    for (int t = 0; t < nt; t++)
-        for (int k = own_start[t]; k < own_start[t + 1]; k++) {
-            int p = pl->own[k];
-            int tj = owner(w->pj[p], n, nt);
-            if (tj != t)
-                pl->cross[cross_start[t] + ccnt[t]++] = p;
-        }
-    /* incoming of block u: cross pairs of every block whose j is in u, by p:
-     * a merge over the blocks' cross lists (each ascending) */
-    {
-        int *cursor = icnt; /* per block of i: next cross pair to look at */
-        for (int t = 0; t < nt; t++)
-            cursor[t] = cross_start[t];
-        int *fill = ccnt; /* per block of j: next slot of its incoming list */
-        for (int u = 0; u < nt; u++)
-            fill[u] = in_start[u];
-        for (;;) { /* repeatedly take the smallest p among the blocks' cross lists */
-            int best = -1, bp = INT_MAX;
-            for (int t = 0; t < nt; t++)
-                if (cursor[t] < cross_start[t + 1] && pl->cross[cursor[t]] < bp)
-                    bp = pl->cross[cursor[t]], best = t;
-            if (best < 0)
-                break;
-            int c = cursor[best]++;
-            pl->in[fill[owner(w->pj[bp], n, nt)]++] = c;
-        }
+    /* cross pairs grouped by the block of i, ascending p; the incoming list
+     * of block u: those whose j it holds, ascending p too (they are taken in
+     * ascending p) */
+    int *fill = cnt + 2 * (nt + 1); /* per block of j: next slot of its incoming list */
+    memcpy(fill, in_start, (size_t)nt * sizeof *fill);
+    for (int t = 0, c = 0; t < nt; t++) {
+        const int hi = block_lo(t + 1, n, nt);
+        for (int p = own_start[t]; p < own_start[t + 1]; p++)
+            if (pj[p] >= hi) {
+                pl->cross[c] = p;
+                pl->in[fill[owner(pj[p], n, nt)]++] = c;
+                c++;
+            }
     }
     pl->n_cross = n_cross;
     pl->valid = 1;
@@ -485,26 +467,21 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
 /* Candidate pairs through the contact test, without a branch on its
  * outcome (in a settled bed about half the candidates touch, a coin a
  * branch predictor cannot call): each pair is written into the batch's next
- * place, which is taken only if the grains overlap. The pairs are p = k for
- * k in [k, ke) (own NULL), or p = own[k] below lim (a block's walk, up to
- * its next stored event). Stops when the batch is full; returns the next k.
+ * place, which is taken only if the grains overlap. The pairs are p in
+ * [p, pe). Stops when the batch is full; returns the next p.
  * A pair apart whose spring still holds something has it cleared (rare: the
  * pair just separated). Coincident centres (no normal) count as apart.
  * Nothing in the loop calls out, so the batch's count and the arrays stay
  * in registers. */
-static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b,
-                                                       const int *restrict own, int k, const int ke, const int lim,
-                                                       const int spring)
+static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b, int p,
+                                                       const int pe, const int spring)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     double *restrict hist = a->hist;
     int n = b->n;
-    for (; k < ke && n < BATCH; k++) {
-        const int p = own ? own[k] : k;
-        if (own && p >= lim)
-            break;
+    for (; p < pe && n < BATCH; p++) {
         const int i = pi[p], j = pj[p];
         const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
         const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];
@@ -527,7 +504,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
         n += !apart;
     }
     b->n = n;
-    return k;
+    return p;
 }
 
 /* A batch computed and added; returns its contacts. */
@@ -557,7 +534,7 @@ static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in,
     b.n = 0;
     int contacts = 0;
     for (int k = k0; k < np;) {
-        k = fill(&a, &b, NULL, k, np, INT_MAX, spring);
+        k = fill(&a, &b, k, np, spring);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
@@ -574,7 +551,7 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
                                                              const dem_pair_plan *pl, int t, const int spring)
 {
     const pair_arrays a = *in;
-    const int *own = pl->own, *cross = pl->cross, *inc = pl->in;
+    const int *cross = pl->cross, *inc = pl->in;
     int k = pl->own_start[t], ke = pl->own_start[t + 1];
     int cc = pl->cross_start[t], ce = pl->cross_start[t + 1];
     int m = pl->in_start[t], me = pl->in_start[t + 1];
@@ -584,7 +561,7 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
     /* the next stored event (own cross pair or arriving one) by p */
     int p_cc = cc < ce ? cross[cc] : INT_MAX, p_in = m < me ? cross[inc[m]] : INT_MAX;
     for (; k < ke || m < me;) {
-        int p = k < ke ? own[k] : INT_MAX;
+        int p = k < ke ? k : INT_MAX;
         if (p_in < p) { /* a cross pair arriving at its j */
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = inc[m++];
@@ -605,7 +582,8 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
             continue;
         }
         /* own pairs up to the next event */
-        k = fill(&a, &b, own, k, ke, p_cc < p_in ? p_cc : p_in, spring);
+        const int lim = p_cc < p_in ? p_cc : p_in;
+        k = fill(&a, &b, k, lim < ke ? lim : ke, spring);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
@@ -718,6 +696,25 @@ int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *use
     return CM_OK;
 }
 
+/* Blocks to threads: a thread takes its own blocks first (block t holds
+ * about the grains that thread t's surface and integrate passes handle, so
+ * their data sits in its core's cache: taken by whichever thread came first,
+ * as omp's dynamic schedule does, the stage ran some 20 % slower on two
+ * threads), then any block no thread has claimed yet (a thread whose core
+ * is shared, e.g. with fem_server, must not hold the others up). Who does a
+ * block changes no bits. *k: the thread's place in its order (0 at first);
+ * returns the next block, or -1 when none is left. */
+static int block_claim(int *claim, int nb, int tid, int nt, int *k)
+{
+    const int first = (int)((long)nb * tid / nt);
+    while (*k < nb) {
+        const int t = (first + (*k)++) % nb;
+        if (__atomic_exchange_n(&claim[t], 1, __ATOMIC_ACQ_REL) == 0)
+            return t;
+    }
+    return -1;
+}
+
 int dem_stage_pairs(dem_world *w)
 {
     if (w->n_shaped > 0)
@@ -733,22 +730,20 @@ int dem_stage_pairs(dem_world *w)
     const dem_pair_plan *pl = &w->plan;
     const int nb = pl->n_blocks;
     int contacts = 0;
-    /* Blocks go to whichever thread is free (a core shared with fem_server
-     * must not hold the others up); the bits do not depend on who does one. */
+    int *claim = pl->claim; /* phase A's claims, then phase B's */
+    memset(claim, 0, 2 * (size_t)nb * sizeof *claim);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
     {
-#ifdef _OPENMP
-#pragma omp for schedule(dynamic, 1)
-#endif
-        for (int t = 0; t < nb; t++) /* phase A; the end of the loop is a barrier */
+        const int tid = dem_thread_id();
+        for (int k = 0, t; (t = block_claim(claim, nb, tid, nt, &k)) >= 0;) /* phase A */
             for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++)
                 pl->con[c] = (unsigned char)pair_force(&a, pl->cross[c], pl->cf + (size_t)DEM_PAIR_F * c);
 #ifdef _OPENMP
-#pragma omp for schedule(dynamic, 1) nowait
+#pragma omp barrier
 #endif
-        for (int t = 0; t < nb; t++) /* phase B */
+        for (int k = 0, t; (t = block_claim(claim + nb, nb, tid, nt, &k)) >= 0;) /* phase B */
             contacts += a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1) : walk_block(&a, &s, &in.ct, bf, pl, t, 0);
     }
     return contacts;

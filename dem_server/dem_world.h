@@ -96,11 +96,12 @@ enum { DEM_PAIRS_BLOCK = 1024 };
 typedef struct dem_pair_plan {
     int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
     int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */
-    int *own, own_cap;  /* active pairs grouped by block, ascending p inside: own[own_start[t] ..] */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */
-    int *own_start, *cross_start, *in_start; /* T + 1 each */
+    int *own_start;     /* T + 1: block t owns the active pairs [own_start[t], own_start[t + 1]) (its grains' rows) */
+    int *cross_start, *in_start; /* T + 1 each */
     int *count;         /* 3 (T + 1): scratch of the build */
+    int *claim;         /* 2 T: the blocks taken by a thread in phases A and B of the stage (dem_pairs.c) */
     int n_cross;
     double *cf;         /* DEM_PAIR_F per cross pair: force on i, torques on i and j */
     unsigned char *con; /* per cross pair: in contact this step */

@@ -211,7 +211,7 @@ static inline void carry_spring(const spring_carry *c, int p)
  * the others into tb->rows; both grow as needed. Returns the count, -1 when
  * out of memory; *n_cross counts the pairs with a ghost. */
 static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb, int to_list,
-                        long *n_cross)
+                        const int sorted, long *n_cross)
 {
     const dem_grains *g = &w->g;
     const int own_lo = w->own_lo, own_hi = w->own_hi;
@@ -239,7 +239,12 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
                     if (iz < 0 || iz >= gd->n[2])
                         continue;
                     int cc = (ix * gd->n[1] + iy) * gd->n[2] + iz;
-                    for (int k = cell_start[cc]; k < cell_start[cc + 1]; k++) {
+                    /* sorted: cell cc holds the slots cell_start[cc] .. in
+                     * order, so those up to jmin are not even looked at */
+                    int k0 = cell_start[cc];
+                    if (sorted && k0 <= jmin)
+                        k0 = jmin + 1;
+                    for (int k = k0; k < cell_start[cc + 1]; k++) {
                         int j = cell_items[k];
                         if (j <= jmin)
                             continue;
@@ -280,7 +285,9 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     dem_grid_dims gd;
     if (grid_build(w, &gd))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
+    int sorted = 0; /* grains re-sorted: slot order is cell order */
     if (w->def.reorder_every > 0 && w->rebuild_count % w->def.reorder_every == 0 && g->n > 1) {
+        sorted = 1;
         /* re-sort grains by cell (cell_items is that order) for memory locality */
         dem_grains_permute(w, w->cell_items);
         /* the grid of the sorted grains: cell k's grains are now slots
@@ -309,7 +316,7 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         const int t = dem_thread_id();
         dem_thread_buf *tb = &w->tb[t];
         long n = search_rows(w, &gd, (int)((long)own_hi * t / t_n), (int)((long)own_hi * (t + 1) / t_n), tb, t == 0,
-                             &n_cross);
+                             sorted, &n_cross);
         nomem |= n < 0;
         tb->rows_n = n < 0 ? 0 : n;
     }

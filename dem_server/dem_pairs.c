@@ -36,6 +36,7 @@ typedef struct pair_arrays {
     dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
+    int one_mat;        /* one grain material: every pair's coefficients are [0][0] */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -44,7 +45,7 @@ static pair_arrays pair_arrays_of(dem_world *w)
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
                      w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING};
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->n_mat == 1};
     return a;
 }
 
@@ -381,12 +382,13 @@ static inline int batch_uniform(const pair_batch *b)
 static inline __attribute__((always_inline)) void batch_forces_dispatch(const pair_arrays *in, const coef_table *ct,
                                                                          pair_batch *b)
 {
+    const int uniform = in->one_mat || batch_uniform(b);
     if (in->roll_spring) {
-        if (batch_uniform(b))
+        if (uniform)
             batch_forces_body(in, ct, b, 2, 1);
         else
             batch_forces_body(in, ct, b, 2, 0);
-    } else if (batch_uniform(b)) {
+    } else if (uniform) {
         if (ct->rolling)
             batch_forces_body(in, ct, b, 1, 1);
         else
@@ -472,9 +474,9 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
  * A pair apart whose spring still holds something has it cleared (rare: the
  * pair just separated). Coincident centres (no normal) count as apart.
  * Nothing in the loop calls out, so the batch's count and the arrays stay
- * in registers. */
+ * in registers. one_mat: one grain material, the coefficients' index is 0. */
 static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b, int p,
-                                                       const int pe, const int spring)
+                                                       const int pe, const int spring, const int one_mat)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
@@ -499,7 +501,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
             if (spring)
                 xi[3] = xi[4] = xi[5] = 0.0;
         }
-        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = mat[i] * DEM_MAX_MATERIALS + mat[j];
+        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? 0 : mat[i] * DEM_MAX_MATERIALS + mat[j];
         b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
         n += !apart;
     }
@@ -527,14 +529,14 @@ static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *
  * ends never changes a sum. */
 static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in, const force_sums *s,
                                                            const coef_table *ct, batch_fn batch_forces, int k0,
-                                                           int np, const int spring)
+                                                           int np, const int spring, const int one_mat)
 {
     const pair_arrays a = *in;
     pair_batch b;
     b.n = 0;
     int contacts = 0;
     for (int k = k0; k < np;) {
-        k = fill(&a, &b, k, np, spring);
+        k = fill(&a, &b, k, np, spring, one_mat);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
@@ -548,7 +550,8 @@ static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in,
  * the contacts of the block's own pairs. */
 static inline __attribute__((always_inline)) int walk_block(const pair_arrays *in, const force_sums *s,
                                                              const coef_table *ct, batch_fn batch_forces,
-                                                             const dem_pair_plan *pl, int t, const int spring)
+                                                             const dem_pair_plan *pl, int t, const int spring,
+                                                             const int one_mat)
 {
     const pair_arrays a = *in;
     const int *cross = pl->cross, *inc = pl->in;
@@ -583,7 +586,7 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
         }
         /* own pairs up to the next event */
         const int lim = p_cc < p_in ? p_cc : p_in;
-        k = fill(&a, &b, k, lim < ke ? lim : ke, spring);
+        k = fill(&a, &b, k, lim < ke ? lim : ke, spring, one_mat);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
@@ -673,8 +676,12 @@ static void stage_in_of(dem_world *w, stage_in *in)
 
 static int walk_part(const stage_in *in, int p0, int p1)
 {
-    return in->a.roll_spring ? walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 1)
-                             : walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 0);
+    const pair_arrays *a = &in->a;
+    if (a->one_mat)
+        return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 1)
+                              : walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 0, 1);
+    return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 0)
+                          : walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 0, 0);
 }
 
 int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *user), void *user, int *contacts)
@@ -744,7 +751,10 @@ int dem_stage_pairs(dem_world *w)
 #pragma omp barrier
 #endif
         for (int k = 0, t; (t = block_claim(claim + nb, nb, tid, nt, &k)) >= 0;) /* phase B */
-            contacts += a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1) : walk_block(&a, &s, &in.ct, bf, pl, t, 0);
+            contacts += a.one_mat ? (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 1)
+                                                   : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 1))
+                                  : (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 0)
+                                                   : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 0));
     }
     return contacts;
 }

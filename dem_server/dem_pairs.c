@@ -36,7 +36,7 @@ typedef struct pair_arrays {
     dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
-    int one_mat;        /* one grain material: every pair's coefficients are [0][0] */
+    int one_c;          /* every grain of one material: the pairs' coefficient index (dem_pair_plan.one_c), else -1 */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -45,7 +45,7 @@ static pair_arrays pair_arrays_of(dem_world *w)
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
                      w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING, w->n_mat == 1};
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c};
     return a;
 }
 
@@ -140,6 +140,13 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
     const int *pi = w->pi, *pj = w->pj;
     pl->valid = 0;
     pl->n_blocks = nt;
+    /* one grain material (a bed of one soil: always), so that the stage
+     * need not look up each pair's */
+    const int *mat = w->g.mat;
+    int one = n > 0;
+    for (int i = 1; i < n && one; i++)
+        one = mat[i] == mat[0];
+    pl->one_c = one ? mat[0] * DEM_MAX_MATERIALS + mat[0] : -1;
     if (nt == 1 || n == 0) { /* one thread: the plain loop, no plan needed */
         pl->valid = 1;
         return CM_OK;
@@ -382,7 +389,7 @@ static inline int batch_uniform(const pair_batch *b)
 static inline __attribute__((always_inline)) void batch_forces_dispatch(const pair_arrays *in, const coef_table *ct,
                                                                          pair_batch *b)
 {
-    const int uniform = in->one_mat || batch_uniform(b);
+    const int uniform = in->one_c >= 0 || batch_uniform(b);
     if (in->roll_spring) {
         if (uniform)
             batch_forces_body(in, ct, b, 2, 1);
@@ -474,7 +481,8 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
  * A pair apart whose spring still holds something has it cleared (rare: the
  * pair just separated). Coincident centres (no normal) count as apart.
  * Nothing in the loop calls out, so the batch's count and the arrays stay
- * in registers. one_mat: one grain material, the coefficients' index is 0. */
+ * in registers. one_mat: the grains are all of one material, every pair's
+ * coefficient index is a->one_c (no lookups). */
 static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b, int p,
                                                        const int pe, const int spring, const int one_mat)
 {
@@ -482,6 +490,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     double *restrict hist = a->hist;
+    const int one_c = a->one_c;
     int n = b->n;
     for (; p < pe && n < BATCH; p++) {
         const int i = pi[p], j = pj[p];
@@ -501,7 +510,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
             if (spring)
                 xi[3] = xi[4] = xi[5] = 0.0;
         }
-        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? 0 : mat[i] * DEM_MAX_MATERIALS + mat[j];
+        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? one_c : mat[i] * DEM_MAX_MATERIALS + mat[j];
         b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
         n += !apart;
     }
@@ -677,7 +686,7 @@ static void stage_in_of(dem_world *w, stage_in *in)
 static int walk_part(const stage_in *in, int p0, int p1)
 {
     const pair_arrays *a = &in->a;
-    if (a->one_mat)
+    if (a->one_c >= 0)
         return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 1)
                               : walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 0, 1);
     return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 0)
@@ -751,7 +760,7 @@ int dem_stage_pairs(dem_world *w)
 #pragma omp barrier
 #endif
         for (int k = 0, t; (t = block_claim(claim + nb, nb, tid, nt, &k)) >= 0;) /* phase B */
-            contacts += a.one_mat ? (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 1)
+            contacts += a.one_c >= 0 ? (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 1)
                                                    : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 1))
                                   : (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 0)
                                                    : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 0));

@@ -96,6 +96,7 @@ enum { DEM_PAIRS_BLOCK = 1024 };
 typedef struct dem_pair_plan {
     int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
     int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */
+    int one_c;          /* every grain of one material m: m * DEM_MAX_MATERIALS + m (its pairs' coefficients), else -1 */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */
     int *own_start;     /* T + 1: block t owns the active pairs [own_start[t], own_start[t + 1]) (its grains' rows) */

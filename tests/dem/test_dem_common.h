@@ -81,7 +81,7 @@ static inline int test_box_walls(dem_world *w, double L, double B, int floor)
 /* An open box L x B (floor and four side walls, material 0) with n grains
  * placed, not settled, in two layers (radii 2.2-2.6 mm below, 1.8-2.0 mm
  * above): the falling beds of the thread and rank tests. */
-static inline int test_two_layer_box_of(dem_world *w, double L, double B, int n, int material)
+static inline int test_two_layer_box(dem_world *w, double L, double B, int n)
 {
     cm_error err = {0};
     ENSURE(test_box_walls(w, L, B, 1) == 0);
@@ -89,7 +89,6 @@ static inline int test_two_layer_box_of(dem_world *w, double L, double B, int n,
     double lo[3] = {0, 0, 0}, hi[3] = {L, B, 0.2};
     memcpy(p.box_min, lo, sizeof lo);
     memcpy(p.box_max, hi, sizeof hi);
-    p.material = material;
     p.n_layers = 2;
     p.layers[0].count = n / 2;
     p.layers[0].radius[0] = 2.2e-3, p.layers[0].radius[1] = 2.6e-3;
@@ -97,11 +96,6 @@ static inline int test_two_layer_box_of(dem_world *w, double L, double B, int n,
     p.layers[1].radius[0] = 1.8e-3, p.layers[1].radius[1] = 2.0e-3;
     ENSURE_MSG(dem_bed_place(w, &p, &err) == 0, "%s", err.msg);
     return 0;
-}
-
-static inline int test_two_layer_box(dem_world *w, double L, double B, int n)
-{
-    return test_two_layer_box_of(w, L, B, n, 0);
 }
 
 #endif

@@ -724,9 +724,7 @@ int dem_surface_update(dem_world *w, const double *node_x, const double *node_v,
         memcpy(s->v, node_v, (size_t)n3 * sizeof *s->v);
     else
         memset(s->v, 0, (size_t)n3 * sizeof *s->v);
-    double t0 = cm_now();
-    dem_surface_refit(s);
-    w->prof.surface += cm_now() - t0;
+    dem_surface_moved(s);
     return CM_OK;
 }
 

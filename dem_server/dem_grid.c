@@ -46,6 +46,10 @@ int dem_pairs_reserve(dem_world *w, int need)
             return CM_ERR_NOMEM;
         w->hist_ori[k] = o;
     }
+    unsigned char *hd = realloc(w->held, (size_t)cap);
+    if (!hd)
+        return CM_ERR_NOMEM;
+    w->held = hd;
     w->pair_cap = cap;
     return CM_OK;
 }

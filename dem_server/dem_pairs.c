@@ -33,6 +33,7 @@ typedef struct pair_arrays {
     const double *x, *y, *z, *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i;
     const int *mat, *pi, *pj;
     double *hist;       /* hs per pair (dem_world.hist_stride) */
+    unsigned char *held; /* per pair: its row holds something (dem_world.held) */
     dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
@@ -44,9 +45,22 @@ static pair_arrays pair_arrays_of(dem_world *w)
     const dem_grains *g = &w->g;
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
-                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt,
+                     w->pj,    w->hist_val[w->hist_cur],   w->held,  w->coef,  w->def.dt,
                      w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c};
     return a;
+}
+
+/* 1 if a spring row of hs values holds one other than ±0: from the bits
+ * without the sign, no floating-point compares. */
+static inline int row_held(const double *xi, const int hs)
+{
+    uint64_t u = 0;
+    for (int k = 0; k < hs; k++) {
+        uint64_t b;
+        memcpy(&b, xi + k, sizeof b);
+        u |= b << 1;
+    }
+    return u != 0;
 }
 
 /* Grain–grain contact of pair p (slots i, j): the force on i and the torques
@@ -147,6 +161,11 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
     for (int i = 1; i < n && one; i++)
         one = mat[i] == mat[0];
     pl->one_c = one ? mat[0] * DEM_MAX_MATERIALS + mat[0] : -1;
+    /* which springs hold something, for the candidates' test (the list or
+     * its rows changed) */
+    const double *hv = w->hist_val[w->hist_cur];
+    for (int p = 0; p < np; p++)
+        w->held[p] = (unsigned char)row_held(hv + (size_t)w->hist_stride * p, w->hist_stride);
     if (nt == 1 || n == 0) { /* one thread: the plain loop, no plan needed */
         pl->valid = 1;
         return CM_OK;
@@ -442,6 +461,7 @@ static inline __attribute__((always_inline)) void batch_scatter_body(const pair_
         xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
         if (spring)
             xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
+        a->held[p] = (unsigned char)row_held(xi, hs);
         double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
                                 b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
         add_i(s, i, f);
@@ -490,6 +510,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     double *restrict hist = a->hist;
+    unsigned char *restrict held = a->held;
     const int one_c = a->one_c;
     int n = b->n;
     for (; p < pe && n < BATCH; p++) {
@@ -497,18 +518,12 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
         const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
         const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];
         const int apart = (d2 >= rs * rs) | (d2 == 0.0);
-        double *xi = hist + (size_t)hs * p;
-        /* held: some component != 0.0 (-0.0 is not held), from the bits
-         * without the sign: no floating-point compares */
-        uint64_t u0, u1, u2, u3 = 0, u4 = 0, u5 = 0;
-        memcpy(&u0, xi, 8), memcpy(&u1, xi + 1, 8), memcpy(&u2, xi + 2, 8);
-        if (spring)
-            memcpy(&u3, xi + 3, 8), memcpy(&u4, xi + 4, 8), memcpy(&u5, xi + 5, 8);
-        const int held = ((u0 << 1) | (u1 << 1) | (u2 << 1) | (u3 << 1) | (u4 << 1) | (u5 << 1)) != 0;
-        if (apart & held) {
+        if (apart & held[p]) {
+            double *xi = hist + (size_t)hs * p;
             xi[0] = xi[1] = xi[2] = 0.0;
             if (spring)
                 xi[3] = xi[4] = xi[5] = 0.0;
+            held[p] = 0;
         }
         b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? one_c : mat[i] * DEM_MAX_MATERIALS + mat[j];
         b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
@@ -754,8 +769,11 @@ int dem_stage_pairs(dem_world *w)
     {
         const int tid = dem_thread_id();
         for (int k = 0, t; (t = block_claim(claim, nb, tid, nt, &k)) >= 0;) /* phase A */
-            for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++)
-                pl->con[c] = (unsigned char)pair_force(&a, pl->cross[c], pl->cf + (size_t)DEM_PAIR_F * c);
+            for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++) {
+                const int p = pl->cross[c];
+                pl->con[c] = (unsigned char)pair_force(&a, p, pl->cf + (size_t)DEM_PAIR_F * c);
+                a.held[p] = (unsigned char)row_held(a.hist + (size_t)w->hist_stride * p, w->hist_stride);
+            }
 #ifdef _OPENMP
 #pragma omp barrier
 #endif

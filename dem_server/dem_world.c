@@ -202,6 +202,7 @@ void dem_world_destroy(dem_world **wp)
     free(w->hist_val[1]);
     free(w->hist_ori[0]);
     free(w->hist_ori[1]);
+    free(w->held);
     dem_hash_free(&w->hist[0]);
     dem_hash_free(&w->hist[1]);
     if (w->tb)

@@ -176,6 +176,11 @@ struct dem_world {
      * spring is the displacement of i relative to j: when a re-sort swaps a
      * pair's order it is carried over negated */
     unsigned char *hist_ori[2];
+    /* per active pair of the current list: 1 when its row of hist_val holds
+     * a value other than ±0 (the row a pair apart has cleared). Set from
+     * the rows by the plan (dem_pair_plan_build), kept by the pair stage:
+     * the candidates apart are tested on this byte instead of their row. */
+    unsigned char *held;
     double skin;
     int need_rebuild;
     /* cell grid */

@@ -144,11 +144,12 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
     dem_pair_plan *pl = &w->plan;
     const size_t nb1 = (size_t)DEM_PLAN_BLOCKS_PER_THREAD * (size_t)w->n_threads + 1; /* blocks + 1 */
-    int *pstart = xcalloc(8 * nb1, sizeof(int), &bad);
+    int *pstart = xcalloc(9 * nb1, sizeof(int), &bad);
     pl->own_start = pstart, pl->cross_start = pstart ? pstart + nb1 : NULL;
     pl->in_start = pstart ? pstart + 2 * nb1 : NULL;
     pl->count = pstart ? pstart + 3 * nb1 : NULL;
     pl->claim = pstart ? pstart + 6 * nb1 : NULL;
+    pl->slot_lo = pstart ? pstart + 8 * nb1 : NULL;
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)

@@ -78,7 +78,8 @@ enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
 
 /* How threads share the sphere pairs so that every grain adds its pairs'
  * contributions in ascending pair index, as one thread does (dem_pairs.c):
- * grains in T blocks of slots, a pair owned by the block of its i. Rebuilt
+ * grains in T blocks of slots (of about equal numbers of pairs), a pair owned
+ * by the block of its i. Rebuilt
  * with every neighbour list; nothing in it for one thread. */
 /* Blocks of slots per thread. More than one lets a free thread take another
  * block while one shares its core with fem_server, but grains sorted by cell
@@ -99,6 +100,7 @@ typedef struct dem_pair_plan {
     int one_c;          /* every grain of one material m: m * DEM_MAX_MATERIALS + m (its pairs' coefficients), else -1 */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */
+    int *slot_lo;       /* T + 1: block t holds the grain slots [slot_lo[t], slot_lo[t + 1]) */
     int *own_start;     /* T + 1: block t owns the active pairs [own_start[t], own_start[t + 1]) (its grains' rows) */
     int *cross_start, *in_start; /* T + 1 each */
     int *count;         /* 3 (T + 1): scratch of the build */

@@ -363,19 +363,29 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     const int np = w->n_pairs;
     const spring_carry sc = spring_carry_of(w);
-    /* the table in pair order; the springs with it on one thread, after it
-     * over the threads (lookups only, any order) */
-    for (int p = 0; p < np; p++) {
-        nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
-        if (t_n == 1)
+    /* the table in pair order, by one thread; the springs (lookups in the
+     * previous table only, any order) with it on one thread, else by the
+     * other threads meanwhile, in chunks taken as they come, thread 0
+     * joining them when the table is done */
+    if (t_n == 1) {
+        for (int p = 0; p < np; p++) {
+            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
             carry_spring(&sc, p);
-    }
-    if (t_n > 1) {
+        }
+    } else {
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(t_n) schedule(static)
+#pragma omp parallel num_threads(t_n)
 #endif
-        for (int p = 0; p < np; p++)
-            carry_spring(&sc, p);
+        {
+            if (dem_thread_id() == 0)
+                for (int p = 0; p < np; p++)
+                    nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+#ifdef _OPENMP
+#pragma omp for schedule(dynamic, 2048)
+#endif
+            for (int p = 0; p < np; p++)
+                carry_spring(&sc, p);
+        }
     }
     w->hist_cur = 1 - w->hist_cur;
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));

@@ -9,8 +9,9 @@
  * list):
  *   internal pairs (j in the same block) are computed and added by their
  *              block's thread in its walk;
- *   cross pairs (j in another block) are computed first, in parallel and
- *              batched, into a small store (phase A); after a barrier each
+ *   cross pairs (j in another block) are computed first, in parallel (the
+ *              list shared out in equal parts) and batched, into a small
+ *              store (phase A); after a barrier each
  *              thread walks its own pairs, its cross pairs taking their
  *              places in its batches, and the cross pairs arriving at its
  *              grains as j, merged by p (phase B), so that each grain adds
@@ -567,20 +568,22 @@ static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *
     return n;
 }
 
-/* Phase A for block t: its crossing pairs through the batched kernel (the
- * same bits as pair_force), each one's force and torques into cf and
- * whether it touches into con, its spring into the history. */
-static inline __attribute__((always_inline)) void cross_block(const pair_arrays *in, const coef_table *ct,
-                                                              batch_fn batch_forces, const dem_pair_plan *pl,
-                                                              int t, const int spring)
+/* Phase A for the crossing pairs c in [c0, ce) (of any blocks: each one
+ * writes only its own row, cf and con, so the list is shared out in equal
+ * parts, not by block; by block, the pairs crossing from block 0 to 1 would
+ * all fall to one thread): through the batched kernel (the same bits as
+ * pair_force), each one's force and torques into cf and whether it touches
+ * into con, its spring into the history. */
+static inline __attribute__((always_inline)) void cross_part(const pair_arrays *in, const coef_table *ct,
+                                                             batch_fn batch_forces, const dem_pair_plan *pl,
+                                                             int c0, const int ce, const int spring)
 {
     const pair_arrays a = *in;
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
-    const int ce = pl->cross_start[t + 1];
     pair_batch b;
     int cidx[BATCH];
     b.n = b.n_st = 0;
-    for (int c = pl->cross_start[t]; c < ce || b.n > 0;) {
+    for (int c = c0; c < ce || b.n > 0;) {
         for (; c < ce && b.n < BATCH; c++) { /* fill's test and its clearing of a spring apart */
             const int p = pl->cross[c], i = a.pi[p], j = a.pj[p];
             const double ex = a.x[i] - a.x[j], ey = a.y[i] - a.y[j], ez = a.z[i] - a.z[j];
@@ -856,11 +859,14 @@ int dem_stage_pairs(dem_world *w)
 #endif
     {
         const int tid = dem_thread_id();
-        for (int k = 0, t; (t = block_claim(claim, nb, tid, nt, &k)) >= 0;) /* phase A */
+        const int nc = pl->cross_start[nb];
+        for (int k = 0, t; (t = block_claim(claim, nb, tid, nt, &k)) >= 0;) { /* phase A: nb equal parts */
+            const int c0 = (int)((long)nc * t / nb), c1 = (int)((long)nc * (t + 1) / nb);
             if (a.roll_spring)
-                cross_block(&a, &in.ct, bf, pl, t, 1);
+                cross_part(&a, &in.ct, bf, pl, c0, c1, 1);
             else
-                cross_block(&a, &in.ct, bf, pl, t, 0);
+                cross_part(&a, &in.ct, bf, pl, c0, c1, 0);
+        }
 #ifdef _OPENMP
 #pragma omp barrier
 #endif

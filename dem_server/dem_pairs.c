@@ -333,72 +333,29 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         double vrz = (vz[i] - vz[j]) - (ax * ny - ay * nx);
         double R = ri * rj / rs;                  /* eq. 16 */
         double m = 1.0 / (inv_m[i] + inv_m[j]);   /* eq. 17 */
-        /* dem_hm_force */
-        double a = sqrt(R * delta);
-        double sn = 2.0 * cE[c] * a;
-        double st = 8.0 * cG[c] * a; /* eq. 25 */
-        double vn = vrx * nx + vry * ny + vrz * nz;
-        double f_el = (2.0 / 3.0) * sn * delta;
-        double sq = sqrt(sn * m);
-        double f_n = f_el - cgn[c] * sq * vn;
-        f_n = f_n < 0.0 ? 0.0 : f_n;
-        double vtx = vrx - nx * vn, vty = vry - ny * vn, vtz = vrz - nz * vn; /* eq. 14 */
-        double ctt = cgt[c] * cst[c] * sq;
-        /* dem_mindlin_spring */
-        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2];
-        double s2 = sx * sx + sy * sy + sz * sz;
-        double dsn = sx * nx + sy * ny + sz * nz;
-        double px = sx - nx * dsn, py = sy - ny * dsn, pz = sz - nz * dsn;
-        double p2 = px * px + py * py + pz * pz;
-        double sc = sqrt(s2 / p2); /* used only where s2 > 0 and p2 > 0 */
-        double qx = p2 > 0.0 ? px * sc : px, qy = p2 > 0.0 ? py * sc : py, qz = p2 > 0.0 ? pz * sc : pz;
-        sx = s2 > 0.0 ? qx : sx, sy = s2 > 0.0 ? qy : sy, sz = s2 > 0.0 ? qz : sz;
-        sx = dt * vtx + sx, sy = dt * vty + sy, sz = dt * vtz + sz;
-        double ftx = sx * -st - vtx * ctt, fty = sy * -st - vty * ctt, ftz = sz * -st - vtz * ctt;
-        double ft2 = ftx * ftx + fty * fty + ftz * ftz;
-        double fmax = cmu[c] * f_n;
-        double kk = fmax / sqrt(ft2); /* used only where sliding, so ft2 > 0 */
-        double inv_st = -1.0 / st;
-        if (ft2 > fmax * fmax) { /* sliding: the capped force, the spring that carries it alone */
-            ftx = ftx * kk, fty = fty * kk, ftz = ftz * kk;
-            sx = st > 0.0 ? ftx * inv_st : 0.0, sy = st > 0.0 ? fty * inv_st : 0.0, sz = st > 0.0 ? ftz * inv_st : 0.0;
-        }
+        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2], Fx, Fy, Fz, f_n, sn;
+        dem_hm_lane(cE[c], cG[c], cgn[c], cgt[c], cst[c], cmu[c], dt, nx, ny, nz, delta, R, m, vrx, vry, vrz, &sx,
+                    &sy, &sz, &Fx, &Fy, &Fz, &f_n, &sn);
         osx[k] = sx, osy[k] = sy, osz[k] = sz;
-        double Fx = nx * f_n + ftx, Fy = ny * f_n + fty, Fz = nz * f_n + ftz;
         ofx[k] = Fx, ofy[k] = Fy, ofz[k] = Fz;
         /* torques (eq. 7) */
         double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
         double tix = cx * -li, tiy = cy * -li, tiz = cz * -li;
         double tjx = cx * -lj, tjy = cy * -lj, tjz = cz * -lj;
-        if (rolling == 2) { /* dem_rolling_spring, where the pair's mu_roll > 0 */
+        if (rolling) { /* added where the pair's mu_roll > 0 */
             const int roll = cmr[c] > 0.0;
-            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
-            double mrR = cmr[c] * R;
-            double kr = 1.5 * sn * mrR * mrR;
-            double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]) * kr);
-            double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
-            double ux = dt * rwx + u0x, uy = dt * rwy + u0y, uz = dt * rwz + u0z;
-            double mx = ux * -kr - rwx * cr, my = uy * -kr - rwy * cr, mz = uz * -kr - rwz * cr;
-            double m2 = mx * mx + my * my + mz * mz;
-            double mmax = mrR * f_n;
-            double mk = mmax / sqrt(m2); /* used only where rolling, so m2 > 0 */
-            double inv_kr = -1.0 / kr;
-            if (m2 > mmax * mmax) { /* rolling: the capped torque, the rotation that carries it alone */
-                mx = mx * mk, my = my * mk, mz = mz * mk;
-                ux = kr > 0.0 ? mx * inv_kr : 0.0, uy = kr > 0.0 ? my * inv_kr : 0.0, uz = kr > 0.0 ? mz * inv_kr : 0.0;
+            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j], trx, try_, trz;
+            if (rolling == 2) { /* dem_rolling_spring */
+                const double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
+                double ux = u0x, uy = u0y, uz = u0z;
+                dem_rolling_spring_lane(cmr[c], R, sn, f_n, rwx, rwy, rwz,
+                                        DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]), dt, &ux, &uy, &uz, &trx,
+                                        &try_, &trz);
+                oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
+            } else { /* dem_rolling_torque */
+                dem_rolling_torque_lane(cmr[c], R, f_n, rwx, rwy, rwz, 1.0 / (inv_i[i] + inv_i[j]), dt, &trx, &try_,
+                                        &trz);
             }
-            oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
-            tix = roll ? tix + mx : tix, tiy = roll ? tiy + my : tiy, tiz = roll ? tiz + mz : tiz;
-            tjx = roll ? tjx - mx : tjx, tjy = roll ? tjy - my : tjy, tjz = roll ? tjz - mz : tjz;
-        } else if (rolling) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
-            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
-            double wn = sqrt(rwx * rwx + rwy * rwy + rwz * rwz);
-            double t = cmr[c] * R * f_n;
-            double tmax = (1.0 / (inv_i[i] + inv_i[j])) * wn / dt;
-            t = t > tmax ? tmax : t;
-            double f = -t / wn; /* used only where wn > 0 */
-            const int roll = cmr[c] > 0.0, turn = roll && wn > 0.0;
-            double trx = turn ? rwx * f : 0.0, try_ = turn ? rwy * f : 0.0, trz = turn ? rwz * f : 0.0;
             tix = roll ? tix + trx : tix, tiy = roll ? tiy + try_ : tiy, tiz = roll ? tiz + trz : tiz;
             tjx = roll ? tjx - trx : tjx, tjy = roll ? tjy - try_ : tjy, tjz = roll ? tjz - trz : tjz;
         }

@@ -176,6 +176,28 @@ static inline vec3 dem_rolling_spring(const dem_pair_coef *c, double R, double d
  * Always inlined, so that the outputs through pointers stay in registers
  * (one pointer per scalar: an output array kept GCC from vectorising). */
 
+/* The capped spring of dem_mindlin_spring and dem_rolling_spring: the
+ * spring s[xyz] += dt v, the force F = -k s - c v, capped at fmax with the
+ * spring rescaled to carry the capped force alone. */
+static inline __attribute__((always_inline)) void dem_capped_spring_lane(double k, double c, double fmax, double dt,
+                                                                         double vx, double vy, double vz,
+                                                                         double *restrict sx_, double *restrict sy_,
+                                                                         double *restrict sz_, double *restrict fx_,
+                                                                         double *restrict fy_, double *restrict fz_)
+{
+    double sx = dt * vx + *sx_, sy = dt * vy + *sy_, sz = dt * vz + *sz_;
+    double fx = sx * -k - vx * c, fy = sy * -k - vy * c, fz = sz * -k - vz * c;
+    double f2 = fx * fx + fy * fy + fz * fz;
+    double kk = fmax / sqrt(f2); /* used only where capped, so f2 > 0 */
+    double inv_k = -1.0 / k;
+    if (f2 > fmax * fmax) { /* sliding (rolling): the capped force, the spring that carries it alone */
+        fx = fx * kk, fy = fy * kk, fz = fz * kk;
+        sx = k > 0.0 ? fx * inv_k : 0.0, sy = k > 0.0 ? fy * inv_k : 0.0, sz = k > 0.0 ? fz * inv_k : 0.0;
+    }
+    *sx_ = sx, *sy_ = sy, *sz_ = sz;
+    *fx_ = fx, *fy_ = fy, *fz_ = fz;
+}
+
 /* dem_hm_force: normal n (from the partner to the grain), overlap delta,
  * R*, m*, relative velocity vr; coefficients E*, G*, gamma_n, gamma_t,
  * st_sn, mu of the pair; the spring s[xyz] updated. Out: the force F on the
@@ -206,18 +228,9 @@ static inline __attribute__((always_inline)) void dem_hm_lane(double E, double G
     double p2 = px * px + py * py + pz * pz;
     double sc = sqrt(s2 / p2); /* used only where s2 > 0 and p2 > 0 */
     double qx = p2 > 0.0 ? px * sc : px, qy = p2 > 0.0 ? py * sc : py, qz = p2 > 0.0 ? pz * sc : pz;
-    sx = s2 > 0.0 ? qx : sx, sy = s2 > 0.0 ? qy : sy, sz = s2 > 0.0 ? qz : sz;
-    sx = dt * vtx + sx, sy = dt * vty + sy, sz = dt * vtz + sz;
-    double ftx = sx * -st - vtx * ctt, fty = sy * -st - vty * ctt, ftz = sz * -st - vtz * ctt;
-    double ft2 = ftx * ftx + fty * fty + ftz * ftz;
-    double fmax = mu * f_n;
-    double kk = fmax / sqrt(ft2); /* used only where sliding, so ft2 > 0 */
-    double inv_st = -1.0 / st;
-    if (ft2 > fmax * fmax) { /* sliding: the capped force, the spring that carries it alone */
-        ftx = ftx * kk, fty = fty * kk, ftz = ftz * kk;
-        sx = st > 0.0 ? ftx * inv_st : 0.0, sy = st > 0.0 ? fty * inv_st : 0.0, sz = st > 0.0 ? ftz * inv_st : 0.0;
-    }
-    *sx_ = sx, *sy_ = sy, *sz_ = sz;
+    *sx_ = s2 > 0.0 ? qx : sx, *sy_ = s2 > 0.0 ? qy : sy, *sz_ = s2 > 0.0 ? qz : sz;
+    double ftx, fty, ftz;
+    dem_capped_spring_lane(st, ctt, mu * f_n, dt, vtx, vty, vtz, sx_, sy_, sz_, &ftx, &fty, &ftz);
     *fx = nx * f_n + ftx, *fy = ny * f_n + fty, *fz = nz * f_n + ftz;
     *fn = f_n, *sn_ = sn;
 }
@@ -251,18 +264,7 @@ static inline __attribute__((always_inline)) void dem_rolling_spring_lane(double
     double mrR = mu_roll * R;
     double kr = 1.5 * sn * mrR * mrR;
     double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(i_r * kr);
-    double ux = dt * wx + *ux_, uy = dt * wy + *uy_, uz = dt * wz + *uz_;
-    double mx = ux * -kr - wx * cr, my = uy * -kr - wy * cr, mz = uz * -kr - wz * cr;
-    double m2 = mx * mx + my * my + mz * mz;
-    double mmax = mrR * fn;
-    double mk = mmax / sqrt(m2); /* used only where rolling, so m2 > 0 */
-    double inv_kr = -1.0 / kr;
-    if (m2 > mmax * mmax) { /* rolling: the capped torque, the rotation that carries it alone */
-        mx = mx * mk, my = my * mk, mz = mz * mk;
-        ux = kr > 0.0 ? mx * inv_kr : 0.0, uy = kr > 0.0 ? my * inv_kr : 0.0, uz = kr > 0.0 ? mz * inv_kr : 0.0;
-    }
-    *ux_ = ux, *uy_ = uy, *uz_ = uz;
-    *mx_ = mx, *my_ = my, *mz_ = mz;
+    dem_capped_spring_lane(kr, cr, mrR * fn, dt, wx, wy, wz, ux_, uy_, uz_, mx_, my_, mz_);
 }
 
 /* Normal elastic energy stored in a Hertz contact, J. */

@@ -434,14 +434,6 @@ static inline __attribute__((always_inline)) void quat_step4(double *q, const do
         memcpy(q + 12, &r3, sizeof r3);
 }
 
-/* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
- * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
- * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
- * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
- * orientation as a unit quaternion rotated by ω dt (no Euler-angle
- * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
- * since the last rebuild; returns the first slot with a non-finite position,
- * or INT_MAX. */
 /* v <- v + f/m dt, x <- x + v dt along one axis (or ω <- ω + T/I dt with
  * no position: x NULL) for grains [lo, hi), a frozen grain's values kept.
  * One array triple at a time: few streams, so the loop vectorises without
@@ -464,6 +456,14 @@ static inline __attribute__((always_inline)) void kick_drift(double *restrict v,
     }
 }
 
+/* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
+ * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
+ * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
+ * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
+ * orientation as a unit quaternion rotated by ω dt (no Euler-angle
+ * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
+ * since the last rebuild; returns the first slot with a non-finite position,
+ * or INT_MAX. */
 static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, int lo, int hi, double dt,
                                                                  double *maxd2_out)
 {

@@ -176,7 +176,6 @@ static void visit_world(cm_ckpt *ck, dem_world *w)
     cm_ckpt_double(ck, "/pairs/skin", &w->skin);
     cm_ckpt_int(ck, "/pairs/need_rebuild", &w->need_rebuild);
     cm_ckpt_long(ck, "/pairs/rebuild_count", &w->rebuild_count);
-    cm_ckpt_long(ck, "/pairs/profile_rebuilds", &w->prof.rebuilds);
 
     /* Surface springs, per grain slot (dem_surface.h). */
     if (w->surf)

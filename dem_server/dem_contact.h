@@ -166,6 +166,107 @@ static inline vec3 dem_rolling_spring(const dem_pair_coef *c, double R, double d
     return M;
 }
 
+/* ---- the same rules, one lane of a batched kernel ----------------------
+ * The batched kernels (grain pairs, dem_pairs.c; walls, dem_step.c) compute
+ * many contacts in a loop the compiler vectorises. The functions below are
+ * dem_hm_force, dem_rolling_torque and dem_rolling_spring on scalars: the
+ * same operations in the same order, their branches as selects of values
+ * computed both ways (a quotient may be inf or NaN in a lane that does not
+ * use it), hence the same bits (-ffp-contract=off: no fused multiply-adds).
+ * Always inlined, so that the outputs through pointers stay in registers
+ * (one pointer per scalar: an output array kept GCC from vectorising). */
+
+/* The capped spring of dem_mindlin_spring and dem_rolling_spring: the
+ * spring s[xyz] += dt v, the force F = -k s - c v, capped at fmax with the
+ * spring rescaled to carry the capped force alone. */
+static inline __attribute__((always_inline)) void dem_capped_spring_lane(double k, double c, double fmax, double dt,
+                                                                         double vx, double vy, double vz,
+                                                                         double *restrict sx_, double *restrict sy_,
+                                                                         double *restrict sz_, double *restrict fx_,
+                                                                         double *restrict fy_, double *restrict fz_)
+{
+    double sx = dt * vx + *sx_, sy = dt * vy + *sy_, sz = dt * vz + *sz_;
+    double fx = sx * -k - vx * c, fy = sy * -k - vy * c, fz = sz * -k - vz * c;
+    double f2 = fx * fx + fy * fy + fz * fz;
+    double kk = fmax / sqrt(f2); /* used only where capped, so f2 > 0 */
+    double inv_k = -1.0 / k;
+    if (f2 > fmax * fmax) { /* sliding (rolling): the capped force, the spring that carries it alone */
+        fx = fx * kk, fy = fy * kk, fz = fz * kk;
+        sx = k > 0.0 ? fx * inv_k : 0.0, sy = k > 0.0 ? fy * inv_k : 0.0, sz = k > 0.0 ? fz * inv_k : 0.0;
+    }
+    *sx_ = sx, *sy_ = sy, *sz_ = sz;
+    *fx_ = fx, *fy_ = fy, *fz_ = fz;
+}
+
+/* dem_hm_force: normal n (from the partner to the grain), overlap delta,
+ * R*, m*, relative velocity vr; coefficients E*, G*, gamma_n, gamma_t,
+ * st_sn, mu of the pair; the spring s[xyz] updated. Out: the force F on the
+ * grain, |F_n| and S_n (for the rolling spring). */
+static inline __attribute__((always_inline)) void dem_hm_lane(double E, double G, double gn, double gt, double st_sn,
+                                                              double mu, double dt, double nx, double ny, double nz,
+                                                              double delta, double R, double m, double vrx, double vry,
+                                                              double vrz, double *restrict sx_, double *restrict sy_,
+                                                              double *restrict sz_, double *restrict fx,
+                                                              double *restrict fy, double *restrict fz,
+                                                              double *restrict fn, double *restrict sn_)
+{
+    double a = sqrt(R * delta);
+    double sn = 2.0 * E * a;
+    double st = 8.0 * G * a; /* eq. 25 */
+    double vn = vrx * nx + vry * ny + vrz * nz;
+    double f_el = (2.0 / 3.0) * sn * delta;
+    double sq = sqrt(sn * m);
+    double f_n = f_el - gn * sq * vn;
+    f_n = f_n < 0.0 ? 0.0 : f_n;
+    double vtx = vrx - nx * vn, vty = vry - ny * vn, vtz = vrz - nz * vn; /* eq. 14 */
+    double ctt = gt * st_sn * sq;
+    /* dem_mindlin_spring */
+    double sx = *sx_, sy = *sy_, sz = *sz_;
+    double s2 = sx * sx + sy * sy + sz * sz;
+    double dsn = sx * nx + sy * ny + sz * nz;
+    double px = sx - nx * dsn, py = sy - ny * dsn, pz = sz - nz * dsn;
+    double p2 = px * px + py * py + pz * pz;
+    double sc = sqrt(s2 / p2); /* used only where s2 > 0 and p2 > 0 */
+    double qx = p2 > 0.0 ? px * sc : px, qy = p2 > 0.0 ? py * sc : py, qz = p2 > 0.0 ? pz * sc : pz;
+    *sx_ = s2 > 0.0 ? qx : sx, *sy_ = s2 > 0.0 ? qy : sy, *sz_ = s2 > 0.0 ? qz : sz;
+    double ftx, fty, ftz;
+    dem_capped_spring_lane(st, ctt, mu * f_n, dt, vtx, vty, vtz, sx_, sy_, sz_, &ftx, &fty, &ftz);
+    *fx = nx * f_n + ftx, *fy = ny * f_n + fty, *fz = nz * f_n + ftz;
+    *fn = f_n, *sn_ = sn;
+}
+
+/* dem_rolling_torque with mu_roll > 0 (the caller selects): the torque tr
+ * on the grain (zero where w = 0). */
+static inline __attribute__((always_inline)) void dem_rolling_torque_lane(double mu_roll, double R, double fn,
+                                                                          double wx, double wy, double wz,
+                                                                          double i_eff, double dt,
+                                                                          double *restrict trx, double *restrict try_,
+                                                                          double *restrict trz)
+{
+    double wn = sqrt(wx * wx + wy * wy + wz * wz);
+    double t = mu_roll * R * fn;
+    double tmax = i_eff * wn / dt;
+    t = t > tmax ? tmax : t;
+    double f = -t / wn; /* used only where wn > 0 */
+    const int turn = wn > 0.0;
+    *trx = turn ? wx * f : 0.0, *try_ = turn ? wy * f : 0.0, *trz = turn ? wz * f : 0.0;
+}
+
+/* dem_rolling_spring with mu_roll > 0 (the caller selects), S_n from
+ * dem_hm_lane: the torque M on the grain, the rotation u[xyz] updated. */
+static inline __attribute__((always_inline)) void dem_rolling_spring_lane(double mu_roll, double R, double sn,
+                                                                          double fn, double wx, double wy, double wz,
+                                                                          double i_r, double dt, double *restrict ux_,
+                                                                          double *restrict uy_, double *restrict uz_,
+                                                                          double *restrict mx_, double *restrict my_,
+                                                                          double *restrict mz_)
+{
+    double mrR = mu_roll * R;
+    double kr = 1.5 * sn * mrR * mrR;
+    double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(i_r * kr);
+    dem_capped_spring_lane(kr, cr, mrR * fn, dt, wx, wy, wz, ux_, uy_, uz_, mx_, my_, mz_);
+}
+
 /* Normal elastic energy stored in a Hertz contact, J. */
 static inline double dem_hertz_energy(const dem_pair_coef *c, double R, double delta)
 {

@@ -18,7 +18,9 @@
  *   wait      the FEM's reply: surface positions and velocities at t + k dt
  *   surf_bcast distributed (def->dist): the reply from rank 0, the one that
  *             talks to fem_server, to the other ranks
- *   update    dem_surface_update (BVH refit), the terrain window moved
+ *   update    dem_surface_update (the tree's root box; the rest of the tree
+ *             is refitted in stage surface when the tree is walked), the
+ *             terrain window moved
  *   record    output hook, checkpoint, health check, progress line
  * The FEM needs only the forces, so everything after send runs while it
  * steps; the DEM waits only if its grain work is shorter than the FEM's step. */

@@ -46,6 +46,10 @@ int dem_pairs_reserve(dem_world *w, int need)
             return CM_ERR_NOMEM;
         w->hist_ori[k] = o;
     }
+    unsigned char *hd = realloc(w->held, (size_t)cap);
+    if (!hd)
+        return CM_ERR_NOMEM;
+    w->held = hd;
     w->pair_cap = cap;
     return CM_OK;
 }
@@ -211,7 +215,7 @@ static inline void carry_spring(const spring_carry *c, int p)
  * the others into tb->rows; both grow as needed. Returns the count, -1 when
  * out of memory; *n_cross counts the pairs with a ghost. */
 static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb, int to_list,
-                        long *n_cross)
+                        const int sorted, long *n_cross)
 {
     const dem_grains *g = &w->g;
     const int own_lo = w->own_lo, own_hi = w->own_hi;
@@ -239,7 +243,12 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
                     if (iz < 0 || iz >= gd->n[2])
                         continue;
                     int cc = (ix * gd->n[1] + iy) * gd->n[2] + iz;
-                    for (int k = cell_start[cc]; k < cell_start[cc + 1]; k++) {
+                    /* sorted: cell cc holds the slots cell_start[cc] .. in
+                     * order, so those up to jmin are not even looked at */
+                    int k0 = cell_start[cc];
+                    if (sorted && k0 <= jmin)
+                        k0 = jmin + 1;
+                    for (int k = k0; k < cell_start[cc + 1]; k++) {
                         int j = cell_items[k];
                         if (j <= jmin)
                             continue;
@@ -280,7 +289,9 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     dem_grid_dims gd;
     if (grid_build(w, &gd))
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory building the cell grid", w->step);
+    int sorted = 0; /* grains re-sorted: slot order is cell order */
     if (w->def.reorder_every > 0 && w->rebuild_count % w->def.reorder_every == 0 && g->n > 1) {
+        sorted = 1;
         /* re-sort grains by cell (cell_items is that order) for memory locality */
         dem_grains_permute(w, w->cell_items);
         /* the grid of the sorted grains: cell k's grains are now slots
@@ -309,7 +320,7 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         const int t = dem_thread_id();
         dem_thread_buf *tb = &w->tb[t];
         long n = search_rows(w, &gd, (int)((long)own_hi * t / t_n), (int)((long)own_hi * (t + 1) / t_n), tb, t == 0,
-                             &n_cross);
+                             sorted, &n_cross);
         nomem |= n < 0;
         tb->rows_n = n < 0 ? 0 : n;
     }
@@ -352,19 +363,29 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the contact history", w->step);
     const int np = w->n_pairs;
     const spring_carry sc = spring_carry_of(w);
-    /* the table in pair order; the springs with it on one thread, after it
-     * over the threads (lookups only, any order) */
-    for (int p = 0; p < np; p++) {
-        nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
-        if (t_n == 1)
+    /* the table in pair order, by one thread; the springs (lookups in the
+     * previous table only, any order) with it on one thread, else by the
+     * other threads meanwhile, in chunks taken as they come, thread 0
+     * joining them when the table is done */
+    if (t_n == 1) {
+        for (int p = 0; p < np; p++) {
+            nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
             carry_spring(&sc, p);
-    }
-    if (t_n > 1) {
+        }
+    } else {
 #ifdef _OPENMP
-#pragma omp parallel for num_threads(t_n) schedule(static)
+#pragma omp parallel num_threads(t_n)
 #endif
-        for (int p = 0; p < np; p++)
-            carry_spring(&sc, p);
+        {
+            if (dem_thread_id() == 0)
+                for (int p = 0; p < np; p++)
+                    nw->row[dem_hash_insert(nw, dem_pair_key(sc.tag[sc.pi[p]], sc.tag[sc.pj[p]]))] = p;
+#ifdef _OPENMP
+#pragma omp for schedule(dynamic, 2048)
+#endif
+            for (int p = 0; p < np; p++)
+                carry_spring(&sc, p);
+        }
     }
     w->hist_cur = 1 - w->hist_cur;
     memcpy(g->x0, g->x, (size_t)g->n * sizeof(double));

@@ -4,18 +4,23 @@
  * The order of the sums is the pair-list order: every grain receives its
  * pairs' contributions in ascending pair index p, whatever the number of
  * threads. One thread is the plain loop over p. With T threads the grains are
- * split into T blocks of slots, and a pair belongs to the block of its grain
- * i (the plan, built once per neighbour list):
+ * split into T blocks of slots with about equal numbers of pairs, and a pair
+ * belongs to the block of its grain i (the plan, built once per neighbour
+ * list):
  *   internal pairs (j in the same block) are computed and added by their
  *              block's thread in its walk;
- *   cross pairs (j in another block) are computed first, in parallel, into a
- *              small store (phase A); after a barrier each thread walks its
- *              own pairs and the cross pairs arriving at its grains as j,
- *              merged by p (phase B), so that each grain adds its
- *              contributions in ascending p, as the single loop does.
+ *   cross pairs (j in another block) are computed first, in parallel (the
+ *              list shared out in equal parts) and batched, into a small
+ *              store (phase A); after a barrier each
+ *              thread walks its own pairs, its cross pairs taking their
+ *              places in its batches, and the cross pairs arriving at its
+ *              grains as j, merged by p (phase B), so that each grain adds
+ *              its contributions in ascending p, as the single loop does.
  * The result is bit-identical for any thread count; only the few pairs
- * across a block boundary are stored. Blocks go to whichever thread is free
- * (DEM_PLAN_BLOCKS_PER_THREAD, dem_world.h, says how many there are). */
+ * across a block boundary are stored. The list holds rows in slot order, so
+ * a block's own pairs are a contiguous range of p. A thread takes its own
+ * blocks first, then any left (block_claim; DEM_PLAN_BLOCKS_PER_THREAD,
+ * dem_world.h, says how many there are). */
 #include <limits.h>
 #include <math.h>
 #include <stdint.h>
@@ -31,9 +36,11 @@ typedef struct pair_arrays {
     const double *x, *y, *z, *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i;
     const int *mat, *pi, *pj;
     double *hist;       /* hs per pair (dem_world.hist_stride) */
+    unsigned char *held; /* per pair: its row holds something (dem_world.held) */
     dem_pair_coef (*coef)[DEM_MAX_MATERIALS];
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
+    int one_c;          /* every grain of one material: the pairs' coefficient index (dem_pair_plan.one_c), else -1 */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -41,9 +48,22 @@ static pair_arrays pair_arrays_of(dem_world *w)
     const dem_grains *g = &w->g;
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
-                     w->pj,    w->hist_val[w->hist_cur],   w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING};
+                     w->pj,    w->hist_val[w->hist_cur],   w->held,  w->coef,  w->def.dt,
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c};
     return a;
+}
+
+/* 1 if a spring row of hs values holds one other than ±0: from the bits
+ * without the sign, no floating-point compares. */
+static inline int row_held(const double *xi, const int hs)
+{
+    uint64_t u = 0;
+    for (int k = 0; k < hs; k++) {
+        uint64_t b;
+        memcpy(&b, xi + k, sizeof b);
+        u |= b << 1;
+    }
+    return u != 0;
 }
 
 /* Grain–grain contact of pair p (slots i, j): the force on i and the torques
@@ -115,17 +135,12 @@ static inline __attribute__((always_inline)) void add_j(const force_sums *s, int
 
 /* ---- the plan ---------------------------------------------------------- */
 
-/* First slot of block t: blocks are [n t / T, n (t + 1) / T). */
-static int block_lo(int t, int n, int nt) { return (int)((long)n * t / nt); }
-
-/* Block of slot s: the t with block_lo(t) <= s < block_lo(t + 1). */
-static int owner(int s, int n, int nt)
+/* Block of slot s: the t with lo[t] <= s < lo[t + 1] (a few blocks). */
+static int owner(const int *lo, int s, int nt)
 {
-    int t = (int)((long)s * nt / n);
-    while (t + 1 < nt && block_lo(t + 1, n, nt) <= s)
+    int t = 0;
+    while (t + 1 < nt && lo[t + 1] <= s)
         t++;
-    while (t > 0 && block_lo(t, n, nt) > s)
-        t--;
     return t;
 }
 
@@ -134,24 +149,58 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
     dem_pair_plan *pl = &w->plan;
     const int n = w->g.n, np = w->n_active_pairs;
     const int nt = w->n_threads == 1 ? 1 : DEM_PLAN_BLOCKS_PER_THREAD * w->n_threads; /* blocks */
+    const int *pi = w->pi, *pj = w->pj;
     pl->valid = 0;
     pl->n_blocks = nt;
+    /* one grain material (a bed of one soil: always), so that the stage
+     * need not look up each pair's */
+    const int *mat = w->g.mat;
+    int one = n > 0;
+    for (int i = 1; i < n && one; i++)
+        one = mat[i] == mat[0];
+    pl->one_c = one ? mat[0] * DEM_MAX_MATERIALS + mat[0] : -1;
+    /* which springs hold something, for the candidates' test (the list or
+     * its rows changed) */
+    const double *hv = w->hist_val[w->hist_cur];
+    for (int p = 0; p < np; p++)
+        w->held[p] = (unsigned char)row_held(hv + (size_t)w->hist_stride * p, w->hist_stride);
     if (nt == 1 || n == 0) { /* one thread: the plain loop, no plan needed */
         pl->valid = 1;
         return CM_OK;
     }
-    int *cnt = pl->count; /* 3 * (nt + 1): own, cross, incoming per block */
-    memset(cnt, 0, 3 * ((size_t)nt + 1) * sizeof *cnt);
-    int n_cross = 0;
-    for (int p = 0; p < np; p++) {
-        int ti = owner(w->pi[p], n, nt), tj = owner(w->pj[p], n, nt);
-        cnt[ti]++;
-        if (ti != tj)
-            n_cross++;
+    /* The list holds rows in slot order (i ascending, every j > i:
+     * dem_grid.c), so a block's own pairs are the range of p whose i lies
+     * in it, and a pair's j lies in its own block or a later one. */
+    /* Blocks of about equal numbers of pairs (the stage's work), each a
+     * range of slots: lo[t] is the slot of the row where pair np t / T falls.
+     * (Equal numbers of grains left the first block 4 % more pairs and 10 %
+     * more time on bench_dem's bed.) */
+    int *lo = pl->slot_lo;
+    lo[0] = 0, lo[nt] = n;
+    for (int t = 1; t < nt; t++) {
+        const long k = (long)np * t / nt;
+        lo[t] = np == 0 ? (int)((long)n * t / nt) : pi[k < np ? k : np - 1];
+        if (lo[t] < lo[t - 1])
+            lo[t] = lo[t - 1];
     }
-    if (dem_grow_ints(&pl->own, &pl->own_cap, np) || dem_grow_ints(&pl->cross, &pl->cross_cap, n_cross) ||
-        dem_grow_ints(&pl->in, &pl->in_cap, n_cross))
-        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the pair plan (%d pairs)", w->step, np);
+    int *own_start = pl->own_start, *cross_start = pl->cross_start, *in_start = pl->in_start;
+    int *cnt = pl->count; /* 3 * (nt + 1): cross and incoming per block, then cursors */
+    memset(cnt, 0, 3 * ((size_t)nt + 1) * sizeof *cnt);
+    int *ccnt = cnt, *icnt = cnt + nt + 1;
+    int n_cross = 0;
+    for (int t = 0, p = 0; t < nt; t++) {
+        own_start[t] = p;
+        const int hi = lo[t + 1];
+        for (; p < np && pi[p] < hi; p++) {
+            const int tj = pj[p] < hi ? t : owner(lo, pj[p], nt);
+            if (tj != t)
+                ccnt[t]++, icnt[tj]++, n_cross++;
+        }
+        own_start[t + 1] = p;
+    }
+    if (dem_grow_ints(&pl->cross, &pl->cross_cap, n_cross) || dem_grow_ints(&pl->in, &pl->in_cap, n_cross))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the pair plan (%d cross pairs)", w->step,
+                       n_cross);
     if (n_cross > pl->cf_cap) {
         int c = pl->cf_cap ? pl->cf_cap : 256;
         while (c < n_cross)
@@ -167,54 +216,24 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
                            n_cross);
         pl->cf_cap = c;
     }
-    /* own lists: pairs grouped by block of i, ascending p inside */
-    int *own_start = pl->own_start, *cross_start = pl->cross_start, *in_start = pl->in_start;
-    own_start[0] = 0;
-    for (int t = 0; t < nt; t++)
-        own_start[t + 1] = own_start[t] + cnt[t];
-    memset(cnt, 0, ((size_t)nt + 1) * sizeof *cnt); /* cursors */
-    int *ccnt = cnt + nt + 1, *icnt = cnt + 2 * (nt + 1);
-    for (int p = 0; p < np; p++) {
-        int ti = owner(w->pi[p], n, nt), tj = owner(w->pj[p], n, nt);
-        pl->own[own_start[ti] + cnt[ti]++] = p;
-        if (ti != tj)
-            ccnt[ti]++, icnt[tj]++;
-    }
     cross_start[0] = in_start[0] = 0;
     for (int t = 0; t < nt; t++) {
         cross_start[t + 1] = cross_start[t] + ccnt[t];
         in_start[t + 1] = in_start[t] + icnt[t];
     }
-    /* cross pairs grouped by the block of i; incoming lists by the block of
-     * j; both in ascending p (the own lists are, and blocks are visited in
-     * order for the incoming ones) */
-    memset(ccnt, 0, 2 * ((size_t)nt + 1) * sizeof *ccnt);
-    for (int t = 0; t < nt; t++)
-        for (int k = own_start[t]; k < own_start[t + 1]; k++) {
-            int p = pl->own[k];
-            int tj = owner(w->pj[p], n, nt);
-            if (tj != t)
-                pl->cross[cross_start[t] + ccnt[t]++] = p;
-        }
-    /* incoming of block u: cross pairs of every block whose j is in u, by p:
-     * a merge over the blocks' cross lists (each ascending) */
-    {
-        int *cursor = icnt; /* per block of i: next cross pair to look at */
-        for (int t = 0; t < nt; t++)
-            cursor[t] = cross_start[t];
-        int *fill = ccnt; /* per block of j: next slot of its incoming list */
-        for (int u = 0; u < nt; u++)
-            fill[u] = in_start[u];
-        for (;;) { /* repeatedly take the smallest p among the blocks' cross lists */
-            int best = -1, bp = INT_MAX;
-            for (int t = 0; t < nt; t++)
-                if (cursor[t] < cross_start[t + 1] && pl->cross[cursor[t]] < bp)
-                    bp = pl->cross[cursor[t]], best = t;
-            if (best < 0)
-                break;
-            int c = cursor[best]++;
-            pl->in[fill[owner(w->pj[bp], n, nt)]++] = c;
-        }
+    /* cross pairs grouped by the block of i, ascending p; the incoming list
+     * of block u: those whose j it holds, ascending p too (they are taken in
+     * ascending p) */
+    int *fill = cnt + 2 * (nt + 1); /* per block of j: next slot of its incoming list */
+    memcpy(fill, in_start, (size_t)nt * sizeof *fill);
+    for (int t = 0, c = 0; t < nt; t++) {
+        const int hi = lo[t + 1];
+        for (int p = own_start[t]; p < own_start[t + 1]; p++)
+            if (pj[p] >= hi) {
+                pl->cross[c] = p;
+                pl->in[fill[owner(lo, pj[p], nt)]++] = c;
+                c++;
+            }
     }
     pl->n_cross = n_cross;
     pl->valid = 1;
@@ -245,6 +264,11 @@ typedef struct pair_batch {
     double tix[BATCH], tiy[BATCH], tiz[BATCH], tjx[BATCH], tjy[BATCH], tjz[BATCH];
     double sx[BATCH], sy[BATCH], sz[BATCH];
     double ux[BATCH], uy[BATCH], uz[BATCH]; /* the new rolling rotation (spring model) */
+    /* block-crossing pairs computed in phase A, in their place among the
+     * others: entry st_k[s] adds stored contribution st_c[s] of cf (the
+     * kernel's lane for it is computed and not used) */
+    int n_st, st_k[BATCH], st_c[BATCH];
+    const double *cf;
 } pair_batch;
 
 /* Coefficients of every material pair in structure-of-arrays, indexed by
@@ -309,72 +333,29 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         double vrz = (vz[i] - vz[j]) - (ax * ny - ay * nx);
         double R = ri * rj / rs;                  /* eq. 16 */
         double m = 1.0 / (inv_m[i] + inv_m[j]);   /* eq. 17 */
-        /* dem_hm_force */
-        double a = sqrt(R * delta);
-        double sn = 2.0 * cE[c] * a;
-        double st = 8.0 * cG[c] * a; /* eq. 25 */
-        double vn = vrx * nx + vry * ny + vrz * nz;
-        double f_el = (2.0 / 3.0) * sn * delta;
-        double sq = sqrt(sn * m);
-        double f_n = f_el - cgn[c] * sq * vn;
-        f_n = f_n < 0.0 ? 0.0 : f_n;
-        double vtx = vrx - nx * vn, vty = vry - ny * vn, vtz = vrz - nz * vn; /* eq. 14 */
-        double ctt = cgt[c] * cst[c] * sq;
-        /* dem_mindlin_spring */
-        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2];
-        double s2 = sx * sx + sy * sy + sz * sz;
-        double dsn = sx * nx + sy * ny + sz * nz;
-        double px = sx - nx * dsn, py = sy - ny * dsn, pz = sz - nz * dsn;
-        double p2 = px * px + py * py + pz * pz;
-        double sc = sqrt(s2 / p2); /* used only where s2 > 0 and p2 > 0 */
-        double qx = p2 > 0.0 ? px * sc : px, qy = p2 > 0.0 ? py * sc : py, qz = p2 > 0.0 ? pz * sc : pz;
-        sx = s2 > 0.0 ? qx : sx, sy = s2 > 0.0 ? qy : sy, sz = s2 > 0.0 ? qz : sz;
-        sx = dt * vtx + sx, sy = dt * vty + sy, sz = dt * vtz + sz;
-        double ftx = sx * -st - vtx * ctt, fty = sy * -st - vty * ctt, ftz = sz * -st - vtz * ctt;
-        double ft2 = ftx * ftx + fty * fty + ftz * ftz;
-        double fmax = cmu[c] * f_n;
-        double kk = fmax / sqrt(ft2); /* used only where sliding, so ft2 > 0 */
-        double inv_st = -1.0 / st;
-        if (ft2 > fmax * fmax) { /* sliding: the capped force, the spring that carries it alone */
-            ftx = ftx * kk, fty = fty * kk, ftz = ftz * kk;
-            sx = st > 0.0 ? ftx * inv_st : 0.0, sy = st > 0.0 ? fty * inv_st : 0.0, sz = st > 0.0 ? ftz * inv_st : 0.0;
-        }
+        double sx = hist[p3], sy = hist[p3 + 1], sz = hist[p3 + 2], Fx, Fy, Fz, f_n, sn;
+        dem_hm_lane(cE[c], cG[c], cgn[c], cgt[c], cst[c], cmu[c], dt, nx, ny, nz, delta, R, m, vrx, vry, vrz, &sx,
+                    &sy, &sz, &Fx, &Fy, &Fz, &f_n, &sn);
         osx[k] = sx, osy[k] = sy, osz[k] = sz;
-        double Fx = nx * f_n + ftx, Fy = ny * f_n + fty, Fz = nz * f_n + ftz;
         ofx[k] = Fx, ofy[k] = Fy, ofz[k] = Fz;
         /* torques (eq. 7) */
         double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
         double tix = cx * -li, tiy = cy * -li, tiz = cz * -li;
         double tjx = cx * -lj, tjy = cy * -lj, tjz = cz * -lj;
-        if (rolling == 2) { /* dem_rolling_spring, where the pair's mu_roll > 0 */
+        if (rolling) { /* added where the pair's mu_roll > 0 */
             const int roll = cmr[c] > 0.0;
-            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
-            double mrR = cmr[c] * R;
-            double kr = 1.5 * sn * mrR * mrR;
-            double cr = 2.0 * DEM_ROLLING_DAMPING_RATIO * sqrt(DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]) * kr);
-            double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
-            double ux = dt * rwx + u0x, uy = dt * rwy + u0y, uz = dt * rwz + u0z;
-            double mx = ux * -kr - rwx * cr, my = uy * -kr - rwy * cr, mz = uz * -kr - rwz * cr;
-            double m2 = mx * mx + my * my + mz * mz;
-            double mmax = mrR * f_n;
-            double mk = mmax / sqrt(m2); /* used only where rolling, so m2 > 0 */
-            double inv_kr = -1.0 / kr;
-            if (m2 > mmax * mmax) { /* rolling: the capped torque, the rotation that carries it alone */
-                mx = mx * mk, my = my * mk, mz = mz * mk;
-                ux = kr > 0.0 ? mx * inv_kr : 0.0, uy = kr > 0.0 ? my * inv_kr : 0.0, uz = kr > 0.0 ? mz * inv_kr : 0.0;
+            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j], trx, try_, trz;
+            if (rolling == 2) { /* dem_rolling_spring */
+                const double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
+                double ux = u0x, uy = u0y, uz = u0z;
+                dem_rolling_spring_lane(cmr[c], R, sn, f_n, rwx, rwy, rwz,
+                                        DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]), dt, &ux, &uy, &uz, &trx,
+                                        &try_, &trz);
+                oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
+            } else { /* dem_rolling_torque */
+                dem_rolling_torque_lane(cmr[c], R, f_n, rwx, rwy, rwz, 1.0 / (inv_i[i] + inv_i[j]), dt, &trx, &try_,
+                                        &trz);
             }
-            oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
-            tix = roll ? tix + mx : tix, tiy = roll ? tiy + my : tiy, tiz = roll ? tiz + mz : tiz;
-            tjx = roll ? tjx - mx : tjx, tjy = roll ? tjy - my : tjy, tjz = roll ? tjz - mz : tjz;
-        } else if (rolling) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
-            double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j];
-            double wn = sqrt(rwx * rwx + rwy * rwy + rwz * rwz);
-            double t = cmr[c] * R * f_n;
-            double tmax = (1.0 / (inv_i[i] + inv_i[j])) * wn / dt;
-            t = t > tmax ? tmax : t;
-            double f = -t / wn; /* used only where wn > 0 */
-            const int roll = cmr[c] > 0.0, turn = roll && wn > 0.0;
-            double trx = turn ? rwx * f : 0.0, try_ = turn ? rwy * f : 0.0, trz = turn ? rwz * f : 0.0;
             tix = roll ? tix + trx : tix, tiy = roll ? tiy + try_ : tiy, tiz = roll ? tiz + trz : tiz;
             tjx = roll ? tjx - trx : tjx, tjy = roll ? tjy - try_ : tjy, tjz = roll ? tjz - trz : tjz;
         }
@@ -399,12 +380,13 @@ static inline int batch_uniform(const pair_batch *b)
 static inline __attribute__((always_inline)) void batch_forces_dispatch(const pair_arrays *in, const coef_table *ct,
                                                                          pair_batch *b)
 {
+    const int uniform = in->one_c >= 0 || batch_uniform(b);
     if (in->roll_spring) {
-        if (batch_uniform(b))
+        if (uniform)
             batch_forces_body(in, ct, b, 2, 1);
         else
             batch_forces_body(in, ct, b, 2, 0);
-    } else if (batch_uniform(b)) {
+    } else if (uniform) {
         if (ct->rolling)
             batch_forces_body(in, ct, b, 1, 1);
         else
@@ -445,12 +427,19 @@ static inline __attribute__((always_inline)) void batch_scatter_body(const pair_
                                                                       const pair_batch *b, const int spring)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
+    int si = 0, s_next = b->n_st > 0 ? b->st_k[0] : INT_MAX;
     for (int k = 0; k < b->n; k++) {
         int p = b->p[k], i = b->i[k], j = b->j[k];
+        if (k == s_next) { /* a stored cross pair: its force and torque on i alone */
+            add_i(s, i, b->cf + (size_t)DEM_PAIR_F * b->st_c[si]);
+            s_next = ++si < b->n_st ? b->st_k[si] : INT_MAX;
+            continue;
+        }
         double *xi = a->hist + (size_t)hs * p;
         xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
         if (spring)
             xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
+        a->held[p] = (unsigned char)row_held(xi, hs);
         double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
                                 b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
         add_i(s, i, f);
@@ -485,49 +474,41 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
 /* Candidate pairs through the contact test, without a branch on its
  * outcome (in a settled bed about half the candidates touch, a coin a
  * branch predictor cannot call): each pair is written into the batch's next
- * place, which is taken only if the grains overlap. The pairs are p = k for
- * k in [k, ke) (own NULL), or p = own[k] below lim (a block's walk, up to
- * its next stored event). Stops when the batch is full; returns the next k.
+ * place, which is taken only if the grains overlap. The pairs are p in
+ * [p, pe). Stops when the batch is full; returns the next p.
  * A pair apart whose spring still holds something has it cleared (rare: the
  * pair just separated). Coincident centres (no normal) count as apart.
  * Nothing in the loop calls out, so the batch's count and the arrays stay
- * in registers. */
-static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b,
-                                                       const int *restrict own, int k, const int ke, const int lim,
-                                                       const int spring)
+ * in registers. one_mat: the grains are all of one material, every pair's
+ * coefficient index is a->one_c (no lookups). */
+static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b, int p,
+                                                       const int pe, const int spring, const int one_mat)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     double *restrict hist = a->hist;
+    unsigned char *restrict held = a->held;
+    const int one_c = a->one_c;
     int n = b->n;
-    for (; k < ke && n < BATCH; k++) {
-        const int p = own ? own[k] : k;
-        if (own && p >= lim)
-            break;
+    for (; p < pe && n < BATCH; p++) {
         const int i = pi[p], j = pj[p];
         const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
         const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];
         const int apart = (d2 >= rs * rs) | (d2 == 0.0);
-        double *xi = hist + (size_t)hs * p;
-        /* held: some component != 0.0 (-0.0 is not held), from the bits
-         * without the sign: no floating-point compares */
-        uint64_t u0, u1, u2, u3 = 0, u4 = 0, u5 = 0;
-        memcpy(&u0, xi, 8), memcpy(&u1, xi + 1, 8), memcpy(&u2, xi + 2, 8);
-        if (spring)
-            memcpy(&u3, xi + 3, 8), memcpy(&u4, xi + 4, 8), memcpy(&u5, xi + 5, 8);
-        const int held = ((u0 << 1) | (u1 << 1) | (u2 << 1) | (u3 << 1) | (u4 << 1) | (u5 << 1)) != 0;
-        if (apart & held) {
+        if (apart & held[p]) {
+            double *xi = hist + (size_t)hs * p;
             xi[0] = xi[1] = xi[2] = 0.0;
             if (spring)
                 xi[3] = xi[4] = xi[5] = 0.0;
+            held[p] = 0;
         }
-        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = mat[i] * DEM_MAX_MATERIALS + mat[j];
+        b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? one_c : mat[i] * DEM_MAX_MATERIALS + mat[j];
         b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
         n += !apart;
     }
     b->n = n;
-    return k;
+    return p;
 }
 
 /* A batch computed and added; returns its contacts. */
@@ -539,9 +520,61 @@ static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *
     if (n > 0) {
         batch_forces(a, ct, b);
         batch_scatter(a, s, b, spring);
-        b->n = 0;
+        b->n = b->n_st = 0;
     }
     return n;
+}
+
+/* Phase A for the crossing pairs c in [c0, ce) (of any blocks: each one
+ * writes only its own row, cf and con, so the list is shared out in equal
+ * parts, not by block; by block, the pairs crossing from block 0 to 1 would
+ * all fall to one thread): through the batched kernel (the same bits as
+ * pair_force), each one's force and torques into cf and whether it touches
+ * into con, its spring into the history. */
+static inline __attribute__((always_inline)) void cross_part(const pair_arrays *in, const coef_table *ct,
+                                                             batch_fn batch_forces, const dem_pair_plan *pl,
+                                                             int c0, const int ce, const int spring)
+{
+    const pair_arrays a = *in;
+    const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
+    pair_batch b;
+    int cidx[BATCH];
+    b.n = b.n_st = 0;
+    for (int c = c0; c < ce || b.n > 0;) {
+        for (; c < ce && b.n < BATCH; c++) { /* fill's test and its clearing of a spring apart */
+            const int p = pl->cross[c], i = a.pi[p], j = a.pj[p];
+            const double ex = a.x[i] - a.x[j], ey = a.y[i] - a.y[j], ez = a.z[i] - a.z[j];
+            const double d2 = ex * ex + ey * ey + ez * ez, rs = a.r[i] + a.r[j];
+            const int apart = (d2 >= rs * rs) | (d2 == 0.0);
+            pl->con[c] = (unsigned char)!apart;
+            if (apart) {
+                if (a.held[p]) {
+                    memset(a.hist + (size_t)hs * p, 0, (size_t)hs * sizeof(double));
+                    a.held[p] = 0;
+                }
+                continue;
+            }
+            const int n = b.n++;
+            cidx[n] = c;
+            b.p[n] = p, b.i[n] = i, b.j[n] = j, b.c[n] = a.mat[i] * DEM_MAX_MATERIALS + a.mat[j];
+            b.ex[n] = ex, b.ey[n] = ey, b.ez[n] = ez, b.d2[n] = d2;
+        }
+        if (b.n == 0)
+            continue;
+        batch_forces(&a, ct, &b);
+        for (int k = 0; k < b.n; k++) { /* the spring back, the contribution stored */
+            double *xi = a.hist + (size_t)hs * b.p[k];
+            xi[0] = b.sx[k], xi[1] = b.sy[k], xi[2] = b.sz[k];
+            if (spring)
+                xi[3] = b.ux[k], xi[4] = b.uy[k], xi[5] = b.uz[k];
+            a.held[b.p[k]] = (unsigned char)row_held(xi, hs);
+            double *f = pl->cf + (size_t)DEM_PAIR_F * cidx[k];
+            f[0] = b.fx[k], f[1] = b.fy[k], f[2] = b.fz[k];
+            f[3] = b.tix[k], f[4] = b.tiy[k], f[5] = b.tiz[k];
+            f[6] = b.tjx[k], f[7] = b.tjy[k], f[8] = b.tjz[k];
+        }
+        b.n = 0;
+    }
 }
 
 /* One thread: the active pairs [k0, np) in ascending p (the plain loop).
@@ -550,41 +583,60 @@ static inline __attribute__((always_inline)) int batch_flush(const pair_arrays *
  * ends never changes a sum. */
 static inline __attribute__((always_inline)) int walk_all(const pair_arrays *in, const force_sums *s,
                                                            const coef_table *ct, batch_fn batch_forces, int k0,
-                                                           int np, const int spring)
+                                                           int np, const int spring, const int one_mat)
 {
     const pair_arrays a = *in;
     pair_batch b;
-    b.n = 0;
+    b.n = b.n_st = 0;
     int contacts = 0;
     for (int k = k0; k < np;) {
-        k = fill(&a, &b, NULL, k, np, INT_MAX, spring);
+        k = fill(&a, &b, k, np, spring, one_mat);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
     return contacts + batch_flush(&a, s, ct, batch_forces, &b, spring);
 }
 
+/* A block-crossing pair p in contact, computed in phase A (stored as cf's
+ * c-th), into the batch in its place: its force and torque on i then follow
+ * the batch's earlier pairs and precede its later ones, as in the one-thread
+ * order, without flushing the batch. Its lane gets the pair's geometry like
+ * any other (the kernel computes it; the scatter adds the stored values). */
+static inline __attribute__((always_inline)) void batch_stored(const pair_arrays *a, pair_batch *b, int p, int c,
+                                                               const double *cf)
+{
+    const int i = a->pi[p], j = a->pj[p], n = b->n;
+    const double ex = a->x[i] - a->x[j], ey = a->y[i] - a->y[j], ez = a->z[i] - a->z[j];
+    b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = a->mat[i] * DEM_MAX_MATERIALS + a->mat[j];
+    b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = ex * ex + ey * ey + ez * ez;
+    b->st_k[b->n_st] = n, b->st_c[b->n_st++] = c;
+    b->cf = cf;
+    b->n = n + 1;
+}
+
 /* The pairs of block t in ascending p, merged with the cross pairs arriving
  * at its grains as j (phase B).
- * Pairs in contact go through batches; a stored cross contribution first
- * flushes the batch, so that each grain still adds in ascending p. Returns
- * the contacts of the block's own pairs. */
+ * Pairs in contact go through batches, the block's own crossing ones in
+ * their places (batch_stored); a contribution arriving as j first flushes
+ * the batch (they all come before the block's own pairs), so that each grain
+ * still adds in ascending p. Returns the contacts of the block's own pairs. */
 static inline __attribute__((always_inline)) int walk_block(const pair_arrays *in, const force_sums *s,
                                                              const coef_table *ct, batch_fn batch_forces,
-                                                             const dem_pair_plan *pl, int t, const int spring)
+                                                             const dem_pair_plan *pl, int t, const int spring,
+                                                             const int one_mat)
 {
     const pair_arrays a = *in;
-    const int *own = pl->own, *cross = pl->cross, *inc = pl->in;
+    const int *cross = pl->cross, *inc = pl->in;
     int k = pl->own_start[t], ke = pl->own_start[t + 1];
     int cc = pl->cross_start[t], ce = pl->cross_start[t + 1];
     int m = pl->in_start[t], me = pl->in_start[t + 1];
     pair_batch b;
-    b.n = 0;
+    b.n = b.n_st = 0;
     int contacts = 0;
     /* the next stored event (own cross pair or arriving one) by p */
     int p_cc = cc < ce ? cross[cc] : INT_MAX, p_in = m < me ? cross[inc[m]] : INT_MAX;
     for (; k < ke || m < me;) {
-        int p = k < ke ? own[k] : INT_MAX;
+        int p = k < ke ? k : INT_MAX;
         if (p_in < p) { /* a cross pair arriving at its j */
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = inc[m++];
@@ -595,17 +647,18 @@ static inline __attribute__((always_inline)) int walk_block(const pair_arrays *i
         }
         if (p == p_cc) { /* own cross pair: computed in phase A */
             k++;
-            contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             int c = cc++;
             if (pl->con[c]) {
-                add_i(s, a.pi[p], pl->cf + (size_t)DEM_PAIR_F * c);
-                contacts++;
+                batch_stored(&a, &b, p, c, pl->cf);
+                if (b.n == BATCH)
+                    contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
             }
             p_cc = cc < ce ? cross[cc] : INT_MAX;
             continue;
         }
         /* own pairs up to the next event */
-        k = fill(&a, &b, own, k, ke, p_cc < p_in ? p_cc : p_in, spring);
+        const int lim = p_cc < p_in ? p_cc : p_in;
+        k = fill(&a, &b, k, lim < ke ? lim : ke, spring, one_mat);
         if (b.n == BATCH)
             contacts += batch_flush(&a, s, ct, batch_forces, &b, spring);
     }
@@ -695,8 +748,12 @@ static void stage_in_of(dem_world *w, stage_in *in)
 
 static int walk_part(const stage_in *in, int p0, int p1)
 {
-    return in->a.roll_spring ? walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 1)
-                             : walk_all(&in->a, &in->s, &in->ct, in->bf, p0, p1, 0);
+    const pair_arrays *a = &in->a;
+    if (a->one_c >= 0)
+        return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 1)
+                              : walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 0, 1);
+    return a->roll_spring ? walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 1, 0)
+                          : walk_all(a, &in->s, &in->ct, in->bf, p0, p1, 0, 0);
 }
 
 int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *user), void *user, int *contacts)
@@ -718,6 +775,25 @@ int dem_stage_pairs_between(dem_world *w, int (*between)(dem_world *w, void *use
     return CM_OK;
 }
 
+/* Blocks to threads: a thread takes its own blocks first (block t holds
+ * about the grains that thread t's surface and integrate passes handle, so
+ * their data sits in its core's cache: taken by whichever thread came first,
+ * as omp's dynamic schedule does, the stage ran some 20 % slower on two
+ * threads), then any block no thread has claimed yet (a thread whose core
+ * is shared, e.g. with fem_server, must not hold the others up). Who does a
+ * block changes no bits. *k: the thread's place in its order (0 at first);
+ * returns the next block, or -1 when none is left. */
+static int block_claim(int *claim, int nb, int tid, int nt, int *k)
+{
+    const int first = (int)((long)nb * tid / nt);
+    while (*k < nb) {
+        const int t = (first + (*k)++) % nb;
+        if (__atomic_exchange_n(&claim[t], 1, __ATOMIC_ACQ_REL) == 0)
+            return t;
+    }
+    return -1;
+}
+
 int dem_stage_pairs(dem_world *w)
 {
     if (w->n_shaped > 0)
@@ -733,23 +809,29 @@ int dem_stage_pairs(dem_world *w)
     const dem_pair_plan *pl = &w->plan;
     const int nb = pl->n_blocks;
     int contacts = 0;
-    /* Blocks go to whichever thread is free (a core shared with fem_server
-     * must not hold the others up); the bits do not depend on who does one. */
+    int *claim = pl->claim; /* phase A's claims, then phase B's */
+    memset(claim, 0, 2 * (size_t)nb * sizeof *claim);
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(+ : contacts)
 #endif
     {
+        const int tid = dem_thread_id();
+        const int nc = pl->cross_start[nb];
+        for (int k = 0, t; (t = block_claim(claim, nb, tid, nt, &k)) >= 0;) { /* phase A: nb equal parts */
+            const int c0 = (int)((long)nc * t / nb), c1 = (int)((long)nc * (t + 1) / nb);
+            if (a.roll_spring)
+                cross_part(&a, &in.ct, bf, pl, c0, c1, 1);
+            else
+                cross_part(&a, &in.ct, bf, pl, c0, c1, 0);
+        }
 #ifdef _OPENMP
-#pragma omp for schedule(dynamic, 1)
+#pragma omp barrier
 #endif
-        for (int t = 0; t < nb; t++) /* phase A; the end of the loop is a barrier */
-            for (int c = pl->cross_start[t]; c < pl->cross_start[t + 1]; c++)
-                pl->con[c] = (unsigned char)pair_force(&a, pl->cross[c], pl->cf + (size_t)DEM_PAIR_F * c);
-#ifdef _OPENMP
-#pragma omp for schedule(dynamic, 1) nowait
-#endif
-        for (int t = 0; t < nb; t++) /* phase B */
-            contacts += a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1) : walk_block(&a, &s, &in.ct, bf, pl, t, 0);
+        for (int k = 0, t; (t = block_claim(claim + nb, nb, tid, nt, &k)) >= 0;) /* phase B */
+            contacts += a.one_c >= 0 ? (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 1)
+                                                   : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 1))
+                                  : (a.roll_spring ? walk_block(&a, &s, &in.ct, bf, pl, t, 1, 0)
+                                                   : walk_block(&a, &s, &in.ct, bf, pl, t, 0, 0));
     }
     return contacts;
 }

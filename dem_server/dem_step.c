@@ -46,20 +46,182 @@ static void gravity_range(dem_grains *g, int lo, int hi, const double grav[3])
     }
 }
 
-/* Walls for grain slots [lo, hi), added after gravity; wall forces into wf.
- * Inlined twice with `shaped` constant: the sphere-only instance is the
- * original loop, without a shape test. rec (distributed, spheres): each
- * contact's force on its grain recorded (dem_world.wall_rec), *nrec of
- * them, the grain's place counted from slot g0. */
-static inline __attribute__((always_inline)) int walls_range(dem_world *w, int lo, int hi, double (*wf)[3],
-                                                             const int shaped, double *rec, int g0, int *nrec)
+/* ---- walls ------------------------------------------------------------
+ *
+ * A sphere's wall contacts go through a batched kernel as its pairs do
+ * (dem_pairs.c): the pass over the grains finds the walls each one
+ * touches and queues the contacts; the kernel computes a batch of them in a
+ * loop the compiler vectorises, the lanes doing the scalar rules'
+ * operations in their order (dem_contact.h, "one lane of a batched
+ * kernel"; portable and AVX2 builds, the same bits); the results are added
+ * in the queue's order, grain by grain and wall by wall, as one loop over
+ * the grains adds them. A wall: R* = r, m* = m (eqs. 16, 17 with an
+ * infinite partner), lever from the centre to the contact point on the
+ * plane. */
+enum { WALL_BATCH = 64 };
+
+typedef struct wall_batch {
+    int n;
+    int i[WALL_BATCH], k[WALL_BATCH];    /* grain slot, wall */
+    int c[WALL_BATCH];                   /* coefficients: mat_i * DEM_MAX_WALLS + k */
+    double dist[WALL_BATCH];             /* the centre's distance from the plane (< r) */
+    double nx[WALL_BATCH], ny[WALL_BATCH], nz[WALL_BATCH]; /* the wall's normal */
+    /* out: force and torque on the grain, the new spring and rotation */
+    double fx[WALL_BATCH], fy[WALL_BATCH], fz[WALL_BATCH], tx[WALL_BATCH], ty[WALL_BATCH], tz[WALL_BATCH];
+    double sx[WALL_BATCH], sy[WALL_BATCH], sz[WALL_BATCH], ux[WALL_BATCH], uy[WALL_BATCH], uz[WALL_BATCH];
+} wall_batch;
+
+/* What the kernel reads: the grains and, for each grain material and wall,
+ * the coefficients in structure-of-arrays (loads the loop can gather). */
+enum { WALL_COEFS = DEM_MAX_MATERIALS * DEM_MAX_WALLS };
+typedef struct wall_in {
+    const double *vx, *vy, *vz, *wx, *wy, *wz, *r, *inv_m, *inv_i, *hist;
+    double E[WALL_COEFS], G[WALL_COEFS], gn[WALL_COEFS], gt[WALL_COEFS], st_sn[WALL_COEFS], mu[WALL_COEFS];
+    double mr[WALL_COEFS]; /* mu_roll */
+    double dt;
+    int nw, hs;
+} wall_in;
+
+/* rolling: 0 none anywhere, 1 the constant torque, 2 the spring (as the
+ * pair kernel's) */
+static inline __attribute__((always_inline)) void wall_forces_body(const wall_in *in, wall_batch *b,
+                                                                    const int rolling)
+{
+    const double *restrict vx = in->vx, *restrict vy = in->vy, *restrict vz = in->vz;
+    const double *restrict wx = in->wx, *restrict wy = in->wy, *restrict wz = in->wz;
+    const double *restrict r = in->r, *restrict inv_m = in->inv_m, *restrict inv_i = in->inv_i;
+    const double *restrict hist = in->hist;
+    const double *restrict cE = in->E, *restrict cG = in->G, *restrict cgn = in->gn, *restrict cgt = in->gt;
+    const double *restrict cst = in->st_sn, *restrict cmu = in->mu, *restrict cmr = in->mr;
+    const int *restrict bi = b->i, *restrict bk = b->k, *restrict bc = b->c;
+    const double *restrict bdist = b->dist, *restrict bnx = b->nx, *restrict bny = b->ny, *restrict bnz = b->nz;
+    double *restrict ofx = b->fx, *restrict ofy = b->fy, *restrict ofz = b->fz;
+    double *restrict otx = b->tx, *restrict oty = b->ty, *restrict otz = b->tz;
+    double *restrict osx = b->sx, *restrict osy = b->sy, *restrict osz = b->sz;
+    double *restrict oux = b->ux, *restrict ouy = b->uy, *restrict ouz = b->uz;
+    const double dt = in->dt;
+    const int nw = in->nw, hs = in->hs, n = b->n;
+#pragma omp simd
+    for (int l = 0; l < n; l++) {
+        const int i = bi[l], h = (i * nw + bk[l]) * hs, c = bc[l];
+        const double nx = bnx[l], ny = bny[l], nz = bnz[l], dist = bdist[l], ri = r[i];
+        const double delta = ri - dist;
+        const double m = 1.0 / inv_m[i];
+        const double lx = nx * -dist, ly = ny * -dist, lz = nz * -dist; /* centre -> contact point */
+        const double wix = wx[i], wiy = wy[i], wiz = wz[i];
+        const double vrx = vx[i] + (wiy * lz - wiz * ly), vry = vy[i] + (wiz * lx - wix * lz),
+                     vrz = vz[i] + (wix * ly - wiy * lx);
+        double sx = hist[h], sy = hist[h + 1], sz = hist[h + 2], Fx, Fy, Fz, f_n, sn;
+        dem_hm_lane(cE[c], cG[c], cgn[c], cgt[c], cst[c], cmu[c], dt, nx, ny, nz, delta, ri, m, vrx, vry, vrz, &sx, &sy,
+                    &sz, &Fx, &Fy, &Fz, &f_n, &sn);
+        osx[l] = sx, osy[l] = sy, osz[l] = sz;
+        ofx[l] = Fx, ofy[l] = Fy, ofz[l] = Fz;
+        double trx = 0.0, try_ = 0.0, trz = 0.0;
+        if (rolling) { /* where the pair's mu_roll > 0 */
+            const double mr = cmr[c];
+            const int roll = mr > 0.0;
+            double ax, ay, az;
+            if (rolling == 2) {
+                const double u0x = hist[h + 3], u0y = hist[h + 4], u0z = hist[h + 5];
+                double ux = u0x, uy = u0y, uz = u0z;
+                dem_rolling_spring_lane(mr, ri, sn, f_n, wix, wiy, wiz, DEM_SPHERE_ROLL_INERTIA / inv_i[i], dt, &ux,
+                                        &uy, &uz, &ax, &ay, &az);
+                oux[l] = roll ? ux : u0x, ouy[l] = roll ? uy : u0y, ouz[l] = roll ? uz : u0z;
+            } else {
+                dem_rolling_torque_lane(mr, ri, f_n, wix, wiy, wiz, 1.0 / inv_i[i], dt, &ax, &ay, &az);
+            }
+            trx = roll ? ax : 0.0, try_ = roll ? ay : 0.0, trz = roll ? az : 0.0;
+        }
+        /* eq. 7: lever x F, plus the rolling torque (zero where none acts) */
+        otx[l] = (ly * Fz - lz * Fy) + trx, oty[l] = (lz * Fx - lx * Fz) + try_, otz[l] = (lx * Fy - ly * Fx) + trz;
+    }
+}
+
+static inline __attribute__((always_inline)) void wall_forces_dispatch(const wall_in *in, wall_batch *b,
+                                                                        const int rolling)
+{
+    if (rolling == 2)
+        wall_forces_body(in, b, 2);
+    else if (rolling)
+        wall_forces_body(in, b, 1);
+    else
+        wall_forces_body(in, b, 0);
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+__attribute__((target("avx2"))) static void wall_forces_avx2(const wall_in *in, wall_batch *b, int rolling)
+{
+    wall_forces_dispatch(in, b, rolling);
+}
+#endif
+
+static void wall_forces_portable(const wall_in *in, wall_batch *b, int rolling)
+{
+    wall_forces_dispatch(in, b, rolling);
+}
+
+/* The queued contacts computed and added, in queue order: the springs back
+ * into the history, force and torque into the grain, the reaction into wf,
+ * each contact recorded (rec, distributed: the grain's place counted from
+ * slot g0). */
+static void wall_flush(dem_world *w, const wall_in *in, wall_batch *b, int rolling, double (*wf)[3], double *rec,
+                       int g0, int *nrec)
+{
+    if (b->n == 0)
+        return;
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (!w->def.portable_kernel && __builtin_cpu_supports("avx2"))
+        wall_forces_avx2(in, b, rolling);
+    else
+#endif
+        wall_forces_portable(in, b, rolling);
+    dem_grains *g = &w->g;
+    const int nw = in->nw, hs = in->hs;
+    for (int l = 0; l < b->n; l++) {
+        const int i = b->i[l], k = b->k[l];
+        double *xi = g->wall_hist + ((size_t)i * nw + k) * hs;
+        xi[0] = b->sx[l], xi[1] = b->sy[l], xi[2] = b->sz[l];
+        if (rolling == 2)
+            xi[3] = b->ux[l], xi[4] = b->uy[l], xi[5] = b->uz[l];
+        const double Fx = b->fx[l], Fy = b->fy[l], Fz = b->fz[l];
+        g->fx[i] += Fx, g->fy[i] += Fy, g->fz[i] += Fz;
+        g->tx[i] += b->tx[l], g->ty[i] += b->ty[l], g->tz[i] += b->tz[l];
+        wf[k][0] -= Fx, wf[k][1] -= Fy, wf[k][2] -= Fz;
+        if (rec) {
+            double *q = rec + (size_t)DEM_WALL_REC * (*nrec)++;
+            q[0] = i - g0, q[1] = k, q[2] = Fx, q[3] = Fy, q[4] = Fz;
+        }
+    }
+    b->n = 0;
+}
+
+/* Walls for grain slots [lo, hi), added after gravity; wall forces into wf;
+ * returns the contacts. A shaped grain's contacts are computed on the spot
+ * (dem_shaped_wall), after the queue is flushed, so that every sum keeps
+ * its order. rec (distributed, spheres only): see wall_flush. */
+static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *rec, int g0, int *nrec)
 {
     dem_grains *g = &w->g;
     const int nw = w->n_walls, hs = w->hist_stride;
-    const int roll_spring = w->def.rolling_model == DEM_ROLLING_SPRING;
-    const double dt = w->def.dt;
+    const int shaped = w->n_shaped > 0;
     const int near_valid = w->walls_near_valid;
     const uint32_t all = nw >= 32 ? 0xffffffffu : (1u << nw) - 1u;
+    wall_in in; /* the coefficients: only those of the grains' materials are filled and read */
+    in.vx = g->vx, in.vy = g->vy, in.vz = g->vz, in.wx = g->wx, in.wy = g->wy, in.wz = g->wz;
+    in.r = g->r, in.inv_m = g->inv_m, in.inv_i = g->inv_i, in.hist = g->wall_hist;
+    in.dt = w->def.dt, in.nw = nw, in.hs = hs;
+    int rolling = w->def.rolling_model == DEM_ROLLING_SPRING ? 2 : 0;
+    for (int a = 0; a < w->n_mat; a++)
+        for (int k = 0; k < nw; k++) {
+            const dem_pair_coef *cf = &w->coef[a][w->walls[k].material];
+            const int c = a * DEM_MAX_WALLS + k;
+            in.E[c] = cf->E, in.G[c] = cf->G, in.gn[c] = cf->gamma_n, in.gt[c] = cf->gamma_t;
+            in.st_sn[c] = cf->st_sn, in.mu[c] = cf->mu, in.mr[c] = cf->mu_roll;
+            if (!rolling && cf->mu_roll > 0.0) /* the constant torque somewhere */
+                rolling = 1;
+        }
+    wall_batch b;
+    b.n = 0;
     int contacts = 0;
     for (int i = lo; i < hi; i++) {
         uint32_t mask = g->wall_mask[i];
@@ -68,24 +230,24 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
         uint32_t todo = near_valid ? g->wall_near[i] | mask : all;
         if (!todo || g->frozen[i]) /* a frozen grain stays put: its wall springs wait unchanged */
             continue;
-        double r = g->r[i];
-        double m = 1.0 / g->inv_m[i];
+        const int shape = shaped && g->shape[i] >= 0;
+        const double r = g->r[i];
         while (todo) {
             int k = __builtin_ctz(todo);
             todo &= todo - 1;
             const dem_wall *wl = &w->walls[k];
-            vec3 nrm = v3_load(wl->n);
-            double dist = (g->x[i] - wl->p[0]) * nrm.x + (g->y[i] - wl->p[1]) * nrm.y + (g->z[i] - wl->p[2]) * nrm.z;
-            double delta = r - dist;
+            double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] +
+                          (g->z[i] - wl->p[2]) * wl->n[2];
             double *xi = g->wall_hist + ((size_t)i * nw + k) * hs;
-            if (delta <= 0.0) {
+            if (r - dist <= 0.0) {
                 if (mask & (1u << k)) {
                     memset(xi, 0, (size_t)hs * sizeof *xi);
                     mask &= ~(1u << k);
                 }
                 continue;
             }
-            if (shaped && g->shape[i] >= 0) { /* bounding sphere touches: the shape itself */
+            if (shape) { /* bounding sphere touches: the shape itself */
+                wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
                 double F[3], T[3];
                 if (dem_shaped_wall(w, i, k, xi, F, T)) {
                     mask |= 1u << k;
@@ -98,28 +260,14 @@ static inline __attribute__((always_inline)) int walls_range(dem_world *w, int l
             }
             mask |= 1u << k;
             contacts++;
-            vec3 lever = v3_scale(nrm, -dist); /* centre -> contact point on the plane */
-            vec3 wi = v3(g->wx[i], g->wy[i], g->wz[i]);
-            vec3 vrel = v3_add(v3(g->vx[i], g->vy[i], g->vz[i]), v3_cross(wi, lever));
-            const dem_pair_coef *cf = &w->coef[g->mat[i]][wl->material];
-            double fn;
-            /* wall: R* = r, m* = m (eqs. 16, 17 with an infinite partner) */
-            vec3 F = dem_hm_force(cf, nrm, delta, r, m, vrel, dt, xi, &fn);
-            const double i_r = DEM_SPHERE_ROLL_INERTIA / g->inv_i[i];
-            vec3 Tr = !roll_spring        ? dem_rolling_torque(cf, r, fn, wi, 1.0 / g->inv_i[i], dt)
-                      : cf->mu_roll > 0.0 ? dem_rolling_spring(cf, r, delta, fn, wi, i_r, dt, xi + DEM_HIST_TANGENTIAL)
-                                          : v3(0, 0, 0);
-            vec3 T = v3_add(v3_cross(lever, F), Tr);
-            g->fx[i] += F.x, g->fy[i] += F.y, g->fz[i] += F.z;
-            g->tx[i] += T.x, g->ty[i] += T.y, g->tz[i] += T.z;
-            wf[k][0] -= F.x, wf[k][1] -= F.y, wf[k][2] -= F.z;
-            if (rec) {
-                double *q = rec + (size_t)DEM_WALL_REC * (*nrec)++;
-                q[0] = i - g0, q[1] = k, q[2] = F.x, q[3] = F.y, q[4] = F.z;
-            }
+            b.i[b.n] = i, b.k[b.n] = k, b.c[b.n] = g->mat[i] * DEM_MAX_WALLS + k, b.dist[b.n] = dist;
+            b.nx[b.n] = wl->n[0], b.ny[b.n] = wl->n[1], b.nz[b.n] = wl->n[2];
+            if (++b.n == WALL_BATCH)
+                wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
         }
         g->wall_mask[i] = mask;
     }
+    wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
     return contacts;
 }
 
@@ -188,8 +336,7 @@ static int surface_begin(dem_world *w, cm_error *err)
                           ? w->wall_rec + (size_t)DEM_WALL_REC * w->wall_rec_nw * (lo - g0)
                           : NULL;
         w->tb[tid].wall_rec_n = 0;
-        contacts += shaped ? walls_range(w, lo, hi, wf, 1, NULL, g0, NULL)
-                           : walls_range(w, lo, hi, wf, 0, rec, g0, &w->tb[tid].wall_rec_n);
+        contacts += walls_range(w, lo, hi, wf, rec, g0, &w->tb[tid].wall_rec_n);
     }
     w->wall_rec_grains = n;
     for (int k = 0; k < nw; k++) {
@@ -287,6 +434,28 @@ static inline __attribute__((always_inline)) void quat_step4(double *q, const do
         memcpy(q + 12, &r3, sizeof r3);
 }
 
+/* v <- v + f/m dt, x <- x + v dt along one axis (or ω <- ω + T/I dt with
+ * no position: x NULL) for grains [lo, hi), a frozen grain's values kept.
+ * One array triple at a time: few streams, so the loop vectorises without
+ * spilling (all nine at once spilled most of its registers). */
+static inline __attribute__((always_inline)) void kick_drift(double *restrict v, double *restrict x,
+                                                             const double *restrict f,
+                                                             const double *restrict inv,
+                                                             const unsigned char *restrict frozen, int lo, int hi,
+                                                             double dt, const int drift)
+{
+#pragma omp simd
+    for (int i = lo; i < hi; i++) {
+        const int move = !frozen[i];
+        double nv = v[i] + f[i] * inv[i] * dt;
+        v[i] = move ? nv : v[i];
+        if (drift) {
+            double nx = x[i] + nv * dt;
+            x[i] = move ? nx : x[i];
+        }
+    }
+}
+
 /* Verlet, eqs. 4–5 as predictor/corrector, for grains [lo, hi):
  * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
  * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
@@ -299,34 +468,32 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
                                                                  double *maxd2_out)
 {
     double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
-    double *restrict vx = g->vx, *restrict vy = g->vy, *restrict vz = g->vz;
     double *restrict wx = g->wx, *restrict wy = g->wy, *restrict wz = g->wz;
-    const double *restrict fx = g->fx, *restrict fy = g->fy, *restrict fz = g->fz;
-    const double *restrict tx = g->tx, *restrict ty = g->ty, *restrict tz = g->tz;
-    const double *restrict inv_m = g->inv_m, *restrict inv_i = g->inv_i;
     const double *restrict x0 = g->x0, *restrict y0 = g->y0, *restrict z0 = g->z0;
     double *restrict qa = g->q;
     const unsigned char *restrict frozen = g->frozen;
     double maxd2 = 0.0;
     int nonfinite = 0;
     /* Branch-free so that it vectorises: a frozen grain's values are computed
-     * and thrown away (selects), the same bits as skipping it. */
+     * and thrown away (selects), the same bits as skipping it. Chunks of
+     * grains small enough that the passes over them stay in the L1 cache. */
+    enum { CHUNK = 256 };
+    for (int c0 = lo; c0 < hi; c0 += CHUNK) {
+        const int c1 = hi - c0 > CHUNK ? c0 + CHUNK : hi;
+        kick_drift(g->vx, x, g->fx, g->inv_m, frozen, c0, c1, dt, 1);
+        kick_drift(g->vy, y, g->fy, g->inv_m, frozen, c0, c1, dt, 1);
+        kick_drift(g->vz, z, g->fz, g->inv_m, frozen, c0, c1, dt, 1);
+        kick_drift(wx, NULL, g->tx, g->inv_i, frozen, c0, c1, dt, 0);
+        kick_drift(wy, NULL, g->ty, g->inv_i, frozen, c0, c1, dt, 0);
+        kick_drift(wz, NULL, g->tz, g->inv_i, frozen, c0, c1, dt, 0);
 #pragma omp simd reduction(max : maxd2) reduction(| : nonfinite)
-    for (int i = lo; i < hi; i++) {
-        const int move = !frozen[i];
-        double im = inv_m[i], ii = inv_i[i];
-        double nvx = vx[i] + fx[i] * im * dt, nvy = vy[i] + fy[i] * im * dt, nvz = vz[i] + fz[i] * im * dt;
-        double nwx = wx[i] + tx[i] * ii * dt, nwy = wy[i] + ty[i] * ii * dt, nwz = wz[i] + tz[i] * ii * dt;
-        double nx = x[i] + nvx * dt, ny = y[i] + nvy * dt, nz = z[i] + nvz * dt;
-        vx[i] = move ? nvx : vx[i], vy[i] = move ? nvy : vy[i], vz[i] = move ? nvz : vz[i];
-        wx[i] = move ? nwx : wx[i], wy[i] = move ? nwy : wy[i], wz[i] = move ? nwz : wz[i];
-        nx = move ? nx : x[i], ny = move ? ny : y[i], nz = move ? nz : z[i];
-        x[i] = nx, y[i] = ny, z[i] = nz;
-        double ex = nx - x0[i], ey = ny - y0[i], ez = nz - z0[i];
-        double d2 = ex * ex + ey * ey + ez * ez;
-        d2 = move ? d2 : 0.0;
-        maxd2 = d2 > maxd2 ? d2 : maxd2;
-        nonfinite |= !(d2 <= DBL_MAX); /* NaN or inf */
+        for (int i = c0; i < c1; i++) {
+            double ex = x[i] - x0[i], ey = y[i] - y0[i], ez = z[i] - z0[i];
+            double d2 = ex * ex + ey * ey + ez * ez;
+            d2 = frozen[i] ? 0.0 : d2;
+            maxd2 = d2 > maxd2 ? d2 : maxd2;
+            nonfinite |= !(d2 <= DBL_MAX); /* NaN or inf */
+        }
     }
     /* q <- q + dt/2 (0, ω) q with the new ω, renormalised: first order in
      * ω dt per step, the orientation does not feed back into the forces of

@@ -129,8 +129,25 @@ static int bvh_build(dem_surface *s, int lo, int hi)
     return node;
 }
 
+void dem_surface_moved(dem_surface *s)
+{
+    dem_bvh_node *root = &s->bvh[0];
+    const double *x = s->x;
+    const int *bn = s->box_nodes;
+    double lo[3] = {x[3 * bn[0]], x[3 * bn[0] + 1], x[3 * bn[0] + 2]}, hi[3] = {lo[0], lo[1], lo[2]};
+    for (int k = 1; k < s->n_box_nodes; k++)
+        for (int c = 0; c < 3; c++) {
+            const double v = x[3 * bn[k] + c];
+            lo[c] = min2(lo[c], v), hi[c] = max2(hi[c], v);
+        }
+    memcpy(root->lo, lo, sizeof lo);
+    memcpy(root->hi, hi, sizeof hi);
+    s->tree_stale = 1;
+}
+
 void dem_surface_refit(dem_surface *s)
 {
+    s->tree_stale = 0;
     for (int i = s->n_bvh - 1; i >= 0; i--) {
         dem_bvh_node *nd = &s->bvh[i];
         if (nd->right < 0) {
@@ -317,12 +334,14 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
     s->tri_h = malloc((size_t)n_tris * sizeof *s->tri_h);
     s->bvh = calloc(2 * (size_t)n_tris + 1, sizeof *s->bvh);
     s->perm = malloc((size_t)n_tris * sizeof *s->perm);
+    s->box_nodes = calloc((size_t)n_nodes, sizeof *s->box_nodes);
     s->scratch = calloc((size_t)n_threads, sizeof *s->scratch);
     int bad = !s->scratch;
     for (int t = 0; t < n_threads && !bad; t++)
         bad = scratch_grow(&s->scratch[t], DEM_SURF_CAND_INIT);
     s->cand_cap_logged = DEM_SURF_CAND_INIT;
-    if (!s->x || !s->v || !s->x_lists || !s->node_f || !s->tri || !s->tri_h || !s->bvh || !s->perm || bad ||
+    if (!s->x || !s->v || !s->x_lists || !s->node_f || !s->tri || !s->tri_h || !s->bvh || !s->perm ||
+        !s->box_nodes || bad ||
         dem_surface_grow(s, grain_cap > 0 ? grain_cap : 1)) {
         dem_surface_free(&s);
         return cm_fail(err, CM_ERR_NOMEM, "dem_surface_set: out of memory for %d nodes", n_nodes);
@@ -335,6 +354,12 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
         vec3 a = v3_load(x0 + 3 * tn[0]), b = v3_load(x0 + 3 * tn[1]), c = v3_load(x0 + 3 * tn[2]);
         s->tri_h[t] = sqrt(v3_norm(v3_cross(v3_sub(b, a), v3_sub(c, a)))); /* sqrt(2 area) */
     }
+    int *used = s->box_nodes; /* first as flags, then the list (its prefix) */
+    for (int k = 0; k < 3 * n_tris; k++)
+        used[tris[k]] = 1;
+    for (int i = 0; i < n_nodes; i++)
+        if (used[i])
+            used[s->n_box_nodes++] = i; /* n_box_nodes <= i: only flags already read are overwritten */
     bvh_build(s, 0, n_tris);
     dem_surface_refit(s);
     s->travel[0] = 1.0;
@@ -355,6 +380,7 @@ void dem_surface_free(dem_surface **sp)
     free(s->tri);
     free(s->tri_h);
     free(s->bvh);
+    free(s->box_nodes);
     free(s->perm);
     free(s->hist);
     for (int t = 0; s->scratch && t < s->n_threads; t++)
@@ -991,6 +1017,8 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
         use_lists = moved2 <= margin * margin;
     }
     if (!use_lists) {
+        if (s->tree_stale) /* the tree is walked: its boxes brought up to date */
+            dem_surface_refit(s);
         memcpy(s->x_lists, s->x, (size_t)nn3 * sizeof *s->x);
         s->lists_rebuild = w->rebuild_count;
         s->lists_n = g->n;

@@ -63,6 +63,8 @@ typedef struct dem_surface {
     double *tri_h;   /* n_tris, m: each triangle's size sqrt(2 area) as installed (the FE share's h) */
     int n_bvh;
     dem_bvh_node *bvh;
+    int tree_stale;  /* nodes moved since the last refit: every box but the root's is old (dem_surface_moved) */
+    int *box_nodes, n_box_nodes; /* the triangles' nodes, each once: the root box from them alone */
     int *perm;
     double *hist;    /* DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE per grain slot */
     double ref[3], travel[3];
@@ -89,6 +91,12 @@ int dem_surface_create(int n_nodes, const double *x0, int n_tris, const int *tri
                        int n_threads, dem_surface **out, cm_error *err);
 void dem_surface_free(dem_surface **s);
 void dem_surface_refit(dem_surface *s);
+/* The nodes moved: the root box now, the rest of the tree refitted only
+ * before the tree is next walked (dem_surface_contacts, when the grains'
+ * triangle lists are rebuilt; read from the lists, most passes never walk
+ * it). Boxes are minima and maxima, exact in any order: the same tree as a
+ * refit at every move. */
+void dem_surface_moved(dem_surface *s);
 int dem_surface_grow(dem_surface *s, int grain_cap);
 /* Grain–triangle contacts at the current positions: forces and torques
  * added to the grains, node forces and totals of the surface refilled. */

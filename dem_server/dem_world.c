@@ -144,10 +144,12 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     w->grain_cell = xcalloc((size_t)cap, sizeof(int), &bad);
     dem_pair_plan *pl = &w->plan;
     const size_t nb1 = (size_t)DEM_PLAN_BLOCKS_PER_THREAD * (size_t)w->n_threads + 1; /* blocks + 1 */
-    int *pstart = xcalloc(6 * nb1, sizeof(int), &bad);
+    int *pstart = xcalloc(9 * nb1, sizeof(int), &bad);
     pl->own_start = pstart, pl->cross_start = pstart ? pstart + nb1 : NULL;
     pl->in_start = pstart ? pstart + 2 * nb1 : NULL;
     pl->count = pstart ? pstart + 3 * nb1 : NULL;
+    pl->claim = pstart ? pstart + 6 * nb1 : NULL;
+    pl->slot_lo = pstart ? pstart + 8 * nb1 : NULL;
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)
@@ -192,7 +194,6 @@ void dem_world_destroy(dem_world **wp)
     free(w->cell_items);
     free(w->pi);
     free(w->pj);
-    free(w->plan.own);
     free(w->plan.cross);
     free(w->plan.in);
     free(w->plan.own_start); /* and the other per-block arrays: one allocation */
@@ -202,6 +203,7 @@ void dem_world_destroy(dem_world **wp)
     free(w->hist_val[1]);
     free(w->hist_ori[0]);
     free(w->hist_ori[1]);
+    free(w->held);
     dem_hash_free(&w->hist[0]);
     dem_hash_free(&w->hist[1]);
     if (w->tb)
@@ -400,55 +402,59 @@ int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], co
     return CM_OK;
 }
 
-/* Moves grain data so that slot k holds the grain previously in order[k]. */
+/* Rows of `row` bytes: a[k] <- a[order[k]] through tmp, this thread's share
+ * of k (called inside a parallel region, or alone); the worksharing loops'
+ * barriers keep tmp whole from one array to the next. Inlined with `row`
+ * constant, each row is a plain move. */
+static inline __attribute__((always_inline)) void permute_rows(void *a, void *tmp, const size_t row, const int *order,
+                                                               int n)
+{
+    char *s = a, *d = tmp;
+#ifdef _OPENMP
+#pragma omp for schedule(static)
+#endif
+    for (int i = 0; i < n; i++)
+        memcpy(d + row * (size_t)i, s + row * (size_t)order[i], row);
+#ifdef _OPENMP
+#pragma omp for schedule(static)
+#endif
+    for (int i = 0; i < n; i++)
+        memcpy(s + row * (size_t)i, d + row * (size_t)i, row);
+}
+
+/* Moves grain data so that slot k holds the grain previously in order[k]
+ * (over the world's threads when there are many grains). */
 void dem_grains_permute(dem_world *w, const int *order)
 {
     dem_grains *g = &w->g;
-    int n = g->n;
+    const int n = g->n;
     double *tmp = w->scratch; /* cap * DEM_SCRATCH_PER_GRAIN doubles: no allocation in the loop */
     double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
                      g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
-    for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++) {
-        for (int i = 0; i < n; i++)
-            tmp[i] = dbl[k][order[i]];
-        memcpy(dbl[k], tmp, (size_t)n * sizeof *tmp);
-    }
-    int *itmp = (int *)tmp;
     int *ints[] = {g->mat, g->id, g->surf_count, g->shape, g->tag};
-    for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++) {
+    const size_t wh = (size_t)w->wall_stride * w->hist_stride, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+#ifdef _OPENMP
+#pragma omp parallel num_threads(w->n_threads) if (w->n_threads > 1 && n >= 4096)
+#endif
+    {
+        for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+            permute_rows(dbl[k], tmp, sizeof(double), order, n);
+        for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++)
+            permute_rows(ints[k], tmp, sizeof(int), order, n);
+        permute_rows(g->wall_mask, tmp, sizeof *g->wall_mask, order, n);
+        permute_rows(g->frozen, tmp, sizeof *g->frozen, order, n);
+        permute_rows(g->q, tmp, 4 * sizeof(double), order, n);
+        permute_rows(g->inertia, tmp, 3 * sizeof(double), order, n);
+        permute_rows(g->angmom, tmp, 3 * sizeof(double), order, n);
+        permute_rows(g->wall_hist, tmp, wh * sizeof(double), order, n);
+        if (w->surf)
+            permute_rows(w->surf->hist, tmp, sh * sizeof(double), order, n);
+#ifdef _OPENMP
+#pragma omp for schedule(static)
+#endif
         for (int i = 0; i < n; i++)
-            itmp[i] = ints[k][order[i]];
-        memcpy(ints[k], itmp, (size_t)n * sizeof *itmp);
+            g->slot_of[g->id[i]] = i;
     }
-    uint32_t *utmp = (uint32_t *)tmp;
-    for (int i = 0; i < n; i++)
-        utmp[i] = g->wall_mask[order[i]];
-    memcpy(g->wall_mask, utmp, (size_t)n * sizeof *utmp);
-    unsigned char *btmp = (unsigned char *)tmp;
-    for (int i = 0; i < n; i++)
-        btmp[i] = g->frozen[order[i]];
-    memcpy(g->frozen, btmp, (size_t)n);
-    for (int i = 0; i < n; i++)
-        memcpy(tmp + 4 * i, g->q + 4 * order[i], 4 * sizeof *tmp);
-    memcpy(g->q, tmp, 4 * (size_t)n * sizeof *tmp);
-    double *d3[] = {g->inertia, g->angmom};
-    for (size_t k = 0; k < 2; k++) {
-        for (int i = 0; i < n; i++)
-            memcpy(tmp + 3 * i, d3[k] + 3 * order[i], 3 * sizeof *tmp);
-        memcpy(d3[k], tmp, 3 * (size_t)n * sizeof *tmp);
-    }
-    const size_t wh = (size_t)w->wall_stride * w->hist_stride;
-    for (int i = 0; i < n; i++)
-        memcpy(tmp + wh * i, g->wall_hist + wh * order[i], wh * sizeof *tmp);
-    memcpy(g->wall_hist, tmp, wh * (size_t)n * sizeof *tmp);
-    if (w->surf) {
-        const size_t sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
-        for (int i = 0; i < n; i++)
-            memcpy(tmp + sh * i, w->surf->hist + sh * order[i], sh * sizeof *tmp);
-        memcpy(w->surf->hist, tmp, sh * (size_t)n * sizeof *tmp);
-    }
-    for (int i = 0; i < n; i++)
-        g->slot_of[g->id[i]] = i;
 }
 
 /* ---- removing and adding grains ---------------------------------------- */
@@ -724,9 +730,7 @@ int dem_surface_update(dem_world *w, const double *node_x, const double *node_v,
         memcpy(s->v, node_v, (size_t)n3 * sizeof *s->v);
     else
         memset(s->v, 0, (size_t)n3 * sizeof *s->v);
-    double t0 = cm_now();
-    dem_surface_refit(s);
-    w->prof.surface += cm_now() - t0;
+    dem_surface_moved(s);
     return CM_OK;
 }
 

@@ -78,7 +78,8 @@ enum { DEM_HIST_TANGENTIAL = 3, DEM_HIST_MAX = 6 };
 
 /* How threads share the sphere pairs so that every grain adds its pairs'
  * contributions in ascending pair index, as one thread does (dem_pairs.c):
- * grains in T blocks of slots, a pair owned by the block of its i. Rebuilt
+ * grains in T blocks of slots (of about equal numbers of pairs), a pair owned
+ * by the block of its i. Rebuilt
  * with every neighbour list; nothing in it for one thread. */
 /* Blocks of slots per thread. More than one lets a free thread take another
  * block while one shares its core with fem_server, but grains sorted by cell
@@ -96,11 +97,14 @@ enum { DEM_PAIRS_BLOCK = 1024 };
 typedef struct dem_pair_plan {
     int valid;          /* 0: the list changed (rebuild, checkpoint): rebuilt before the next pair stage */
     int n_blocks;       /* T blocks of slots: DEM_PLAN_BLOCKS_PER_THREAD per thread, 1 for one thread */
-    int *own, own_cap;  /* active pairs grouped by block, ascending p inside: own[own_start[t] ..] */
+    int one_c;          /* every grain of one material m: m * DEM_MAX_MATERIALS + m (its pairs' coefficients), else -1 */
     int *cross, cross_cap; /* pairs whose j is in another block, grouped by the block of i, ascending p */
     int *in, in_cap;    /* per block, indices into cross of the pairs whose j it holds, ascending p */
-    int *own_start, *cross_start, *in_start; /* T + 1 each */
+    int *slot_lo;       /* T + 1: block t holds the grain slots [slot_lo[t], slot_lo[t + 1]) */
+    int *own_start;     /* T + 1: block t owns the active pairs [own_start[t], own_start[t + 1]) (its grains' rows) */
+    int *cross_start, *in_start; /* T + 1 each */
     int *count;         /* 3 (T + 1): scratch of the build */
+    int *claim;         /* 2 T: the blocks taken by a thread in phases A and B of the stage (dem_pairs.c) */
     int n_cross;
     double *cf;         /* DEM_PAIR_F per cross pair: force on i, torques on i and j */
     unsigned char *con; /* per cross pair: in contact this step */
@@ -174,6 +178,11 @@ struct dem_world {
      * spring is the displacement of i relative to j: when a re-sort swaps a
      * pair's order it is carried over negated */
     unsigned char *hist_ori[2];
+    /* per active pair of the current list: 1 when its row of hist_val holds
+     * a value other than ±0 (the row a pair apart has cleared). Set from
+     * the rows by the plan (dem_pair_plan_build), kept by the pair stage:
+     * the candidates apart are tested on this byte instead of their row. */
+    unsigned char *held;
     double skin;
     int need_rebuild;
     /* cell grid */

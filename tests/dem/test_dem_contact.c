@@ -543,6 +543,116 @@ static int history_survives_rebuild(void)
     return 0;
 }
 
+/* Grain s against wall (p, n) by the scalar rules of dem_contact.h, as one
+ * loop over a grain's walls applies them: the force and torque on the
+ * grain (the wall: R* = r, m* = m, lever to the contact point on the plane),
+ * the spring xi[6] (tangential, then rolling) updated; 0 if apart (xi
+ * cleared). */
+static int wall_contact_ref(const dem_pair_coef *cf, int model, const dem_grain_state *s, const double p[3],
+                            const double n[3], double dt, double xi[6], vec3 *F, vec3 *T)
+{
+    vec3 nrm = v3_load(n);
+    double dist = (s->x[0] - p[0]) * nrm.x + (s->x[1] - p[1]) * nrm.y + (s->x[2] - p[2]) * nrm.z;
+    double delta = s->radius - dist;
+    if (delta <= 0.0) {
+        memset(xi, 0, 6 * sizeof *xi);
+        return 0;
+    }
+    const double inv_i = 1.0 / s->inertia[0]; /* the world's 1 / (0.4 m r^2) */
+    vec3 lever = v3_scale(nrm, -dist), wi = v3_load(s->w);
+    vec3 vrel = v3_add(v3_load(s->v), v3_cross(wi, lever));
+    double fn;
+    *F = dem_hm_force(cf, nrm, delta, s->radius, s->mass, vrel, dt, xi, &fn);
+    vec3 Tr = model != DEM_ROLLING_SPRING ? dem_rolling_torque(cf, s->radius, fn, wi, 1.0 / inv_i, dt)
+              : cf->mu_roll > 0.0
+                  ? dem_rolling_spring(cf, s->radius, delta, fn, wi, DEM_SPHERE_ROLL_INERTIA / inv_i, dt, xi + 3)
+                  : v3(0, 0, 0);
+    *T = v3_add(v3_cross(lever, *F), Tr);
+    return 1;
+}
+
+/* The walls' batched kernel (both of its builds) gives the bits of the scalar
+ * rules, step after step: 80 grains apart from each other on a floor, every
+ * other one against a side wall too (120 contacts, batches of 64), spinning
+ * and sliding at assorted speeds, without rolling resistance, with the
+ * constant torque and with the rolling spring. */
+static int walls_batched_as_scalar(void)
+{
+    const int N = 80, steps = 40;
+    const double dt = 2e-6, p[2][3] = {{0, 0, 0}, {0, 0, 0}}, n[2][3] = {{0, 0, 1}, {1, 0, 0}};
+    double spin[4]; /* the grains' summed |torque z| at the end: the rolling resistance must act */
+    for (int variant = 0; variant < 4; variant++) {
+        const int model = variant == 3 ? DEM_ROLLING_SPRING : DEM_ROLLING_CONSTANT_TORQUE;
+        dem_material m = test_material(5e7, 0.3, 0.3, 0.4);
+        m.rolling_friction = variant == 0 ? 0.0 : 0.05;
+        dem_world_def d = dem_world_def_default();
+        d.dt = dt, d.max_grains = N, d.threads = 1, d.rolling_model = model;
+        d.gravity[0] = d.gravity[1] = d.gravity[2] = 0.0;
+        d.portable_kernel = variant == 2; /* the constant torque once more, on the portable build */
+        dem_world *w = NULL;
+        cm_error err = {0};
+        ENSURE(dem_world_create(&d, 1, &m, &w, &err) == 0);
+        for (int k = 0; k < 2; k++)
+            ENSURE(dem_wall_add(w, p[k], n[k], 0, &err) == 0);
+        for (int i = 0; i < N; i++) {
+            const double oz = R0 * (0.002 + 0.004 * (i % 7) / 6.0), ox = R0 * 0.003 * (1 + i % 3);
+            double x[3] = {i % 2 ? 4 * R0 : R0 - ox, 3 * R0 * i, R0 - oz};
+            const double sp = i % 3 ? 1.0 : 0.002; /* every third one slow: its springs hold */
+            double v[3] = {sp * 0.3 * sin(i), sp * 0.3 * cos(1.7 * i), -0.02 * (i % 4)};
+            double om[3] = {sp * 40 * cos(i), sp * 30 * sin(2.3 * i), sp * 50 * sin(0.7 * i)};
+            ENSURE(dem_grain_add(w, x, R0, 0, NULL, &err) == 0);
+            ENSURE(dem_grain_set(w, i, NULL, v, om) == 0);
+        }
+        dem_pair_coef cf; /* as dem_world_create makes it */
+        dem_pair_coef_make(&m, &m, &cf);
+        cf.gamma_n = cf.gamma_t = dem_damping_for_restitution(cf.e, d.damping);
+        static double xi[80][2][6];
+        memset(xi, 0, sizeof xi);
+        int contacts = 0, sliding = 0, sticking = 0;
+        spin[variant] = 0.0;
+        for (int s = 0; s < steps; s++) {
+            dem_grain_state before[80];
+            for (int i = 0; i < N; i++)
+                ENSURE(dem_grain_get(w, i, &before[i]) == 0);
+            ENSURE(dem_step(w, &err) == 0);
+            for (int i = 0; i < N; i++) {
+                double f[3] = {0.0, 0.0, 0.0}, t[3] = {0.0, 0.0, 0.0}; /* gravity: m 0 = +0 */
+                for (int k = 0; k < 2; k++) {
+                    vec3 F, T;
+                    if (!wall_contact_ref(&cf, model, &before[i], p[k], n[k], dt, xi[i][k], &F, &T))
+                        continue;
+                    contacts += s == 0;
+                    f[0] += F.x, f[1] += F.y, f[2] += F.z;
+                    t[0] += T.x, t[1] += T.y, t[2] += T.z;
+                    vec3 nk = v3_load(n[k]), ft = v3_sub(F, v3_scale(nk, v3_dot(F, nk)));
+                    double fnk = v3_dot(F, nk);
+                    sliding += s == steps - 1 && v3_norm(ft) >= 0.999 * cf.mu * fnk;
+                    sticking += s == steps - 1 && v3_norm(ft) < 0.9 * cf.mu * fnk;
+                }
+                dem_grain_state after;
+                ENSURE(dem_grain_get(w, i, &after) == 0);
+                spin[variant] += s == steps - 1 ? fabs(after.t[2]) : 0.0;
+                if (memcmp(f, after.f, sizeof f) || memcmp(t, after.t, sizeof t)) {
+                    printf("variant %d step %d grain %d: force %.17g %.17g %.17g torque %.17g %.17g %.17g, the "
+                           "scalar rules %.17g %.17g %.17g, %.17g %.17g %.17g\n",
+                           variant, s, i, after.f[0], after.f[1], after.f[2], after.t[0], after.t[1], after.t[2],
+                           f[0], f[1], f[2], t[0], t[1], t[2]);
+                    ENSURE(0);
+                }
+            }
+        }
+        printf("variant %d: %d grain-wall contacts, %d sliding and %d sticking at the end, sum |T_z| %.6g N m, "
+               "%d steps bit for bit\n",
+               variant, contacts, sliding, sticking, spin[variant], steps);
+        ENSURE(contacts == N + N / 2);
+        ENSURE(sliding > 5 && sticking > 5);
+        dem_world_destroy(&w);
+    }
+    ENSURE(spin[1] == spin[2]); /* the two builds */
+    ENSURE(fabs(spin[1] - spin[0]) > 0.01 * spin[0] && fabs(spin[3] - spin[0]) > 0.01 * spin[0]);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"history_survives_rebuild", history_survives_rebuild},
     {"hertz_sphere_sphere", hertz_sphere_sphere},
@@ -556,6 +666,7 @@ static const test_case tests[] = {
     {"rolling_spring_holds_on_slope", rolling_spring_holds_on_slope},
     {"rolling_spring_rolls_above_limit", rolling_spring_rolls_above_limit},
     {"rolling_spring_resists_twist", rolling_spring_resists_twist},
+    {"walls_batched_as_scalar", walls_batched_as_scalar},
 };
 
 int main(int argc, char **argv) { return test_main(argc, argv, tests, TEST_COUNT(tests)); }

@@ -27,6 +27,7 @@ typedef struct bed_case {
     bool stirred, surface, frozen;
     bool portable; /* the pair kernel's portable path even where the CPU has AVX2 */
     bool spring;   /* DEM_ROLLING_SPRING instead of the constant torque */
+    int two_mat;   /* two materials alike, the grains of the first (1) or of both, alternately (2) */
 } bed_case;
 
 static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, double *wall_s)
@@ -45,6 +46,22 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     cm_error err = {0};
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
     ENSURE(test_two_layer_box(w, 0.04, 0.04, n) == 0);
+    if (c.two_mat) { /* the same grains and walls in a world of two materials alike */
+        const dem_material mats[2] = {m, m};
+        dem_world *w2 = NULL;
+        ENSURE_MSG(dem_world_create(&d, 2, mats, &w2, &err) == 0, "%s", err.msg);
+        ENSURE(test_box_walls(w2, 0.04, 0.04, 1) == 0);
+        for (int id = 0; id < dem_grain_count(w); id++) {
+            dem_grain_state gs;
+            int id2;
+            ENSURE(dem_grain_get(w, id, &gs) == 0);
+            ENSURE_MSG(dem_grain_add(w2, gs.x, gs.radius, c.two_mat == 2 ? id % 2 : 0, &id2, &err) == 0, "%s",
+                       err.msg);
+            ENSURE(id2 == id);
+        }
+        dem_world_destroy(&w);
+        w = w2;
+    }
     if (c.surface) { /* a tilted triangulated plane 5 mm above the floor */
         const int nx = nx_surf;
         const double s = 0.05 / nx;
@@ -164,7 +181,30 @@ static int profile_covers_the_step(void)
     return 0;
 }
 
-static const test_case tests[] = {{"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
+/* Grains of two materials take the kernel's general path (each pair's
+ * coefficients looked up by its grains' materials), grains of one skip the
+ * lookups: with the two materials alike, both give the same bits, on one
+ * thread and on two. */
+static int same_bits_two_materials(void)
+{
+    uint64_t h[3];
+    dem_stats st;
+    double wall;
+    bed_case c = {.n = 400, .steps = 1500, .stirred = true, .two_mat = 1};
+    ENSURE(run_bed(1, c, &h[0], &st, &wall) == 0);
+    c.two_mat = 2;
+    ENSURE(run_bed(1, c, &h[1], &st, &wall) == 0);
+    ENSURE(run_bed(2, c, &h[2], &st, &wall) == 0);
+    printf("hash grains of one material %016llx, of two alike %016llx (2 threads %016llx); %d grain-grain contacts\n",
+           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], st.contacts_gg);
+    ENSURE(st.contacts_gg > 50);
+    ENSURE(h[0] == h[1]);
+    ENSURE(h[1] == h[2]);
+    return 0;
+}
+
+static const test_case tests[] = {{"same_bits_two_materials", same_bits_two_materials},
+                                  {"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
                                   {"same_bits_stirred", same_bits_stirred},
                                   {"same_bits_with_surface", same_bits_with_surface},
                                   {"same_bits_with_frozen", same_bits_with_frozen},

@@ -102,8 +102,8 @@ typedef struct dem_world_def {
     int reorder_every;       /* re-sort grains by cell (and tag inside a cell) every N neighbour rebuilds
                                 (0 = never); 1 (the default) is needed by a distributed run */
     int rolling_model;       /* enum dem_rolling_model (default constant torque) */
-    bool portable_kernel;    /* true: the pair kernel's portable path even where the CPU has AVX2 (the
-                                same bits either way; for the test that shows it) */
+    bool portable_kernel;    /* true: the vectorised loops' portable builds (pairs, walls, integration) even
+                                where the CPU has AVX2 (the same bits either way; for the tests that show it) */
     double gather_test_every; /* s, distributed: how often the surface contacts' gather to rank 0 is tested
                                  among the grain pairs (dem_step_surface_then); default 1.25e-4. A test costs
                                  a few us (MPI progress, a yield); testing seldom delays fem_server's step,

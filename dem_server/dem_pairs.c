@@ -415,7 +415,7 @@ typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);
 static batch_fn batch_kernel(const dem_world *w)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
-    if (!w->def.portable_kernel && __builtin_cpu_supports("avx2"))
+    if (dem_kernels_avx2(&w->def))
         return batch_forces_avx2;
 #endif
     return batch_forces_portable;

@@ -160,21 +160,18 @@ static void wall_forces_portable(const wall_in *in, wall_batch *b, int rolling)
     wall_forces_dispatch(in, b, rolling);
 }
 
+typedef void (*wall_fn)(const wall_in *, wall_batch *, int);
+
 /* The queued contacts computed and added, in queue order: the springs back
  * into the history, force and torque into the grain, the reaction into wf,
  * each contact recorded (rec, distributed: the grain's place counted from
  * slot g0). */
-static void wall_flush(dem_world *w, const wall_in *in, wall_batch *b, int rolling, double (*wf)[3], double *rec,
-                       int g0, int *nrec)
+static void wall_flush(dem_world *w, wall_fn kernel, const wall_in *in, wall_batch *b, int rolling, double (*wf)[3],
+                       double *rec, int g0, int *nrec)
 {
     if (b->n == 0)
         return;
-#if defined(__x86_64__) && defined(__GNUC__)
-    if (!w->def.portable_kernel && __builtin_cpu_supports("avx2"))
-        wall_forces_avx2(in, b, rolling);
-    else
-#endif
-        wall_forces_portable(in, b, rolling);
+    kernel(in, b, rolling);
     dem_grains *g = &w->g;
     const int nw = in->nw, hs = in->hs;
     for (int l = 0; l < b->n; l++) {
@@ -220,6 +217,11 @@ static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *re
             if (!rolling && cf->mu_roll > 0.0) /* the constant torque somewhere */
                 rolling = 1;
         }
+    wall_fn kernel = wall_forces_portable;
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (dem_kernels_avx2(&w->def))
+        kernel = wall_forces_avx2;
+#endif
     wall_batch b;
     b.n = 0;
     int contacts = 0;
@@ -247,7 +249,7 @@ static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *re
                 continue;
             }
             if (shape) { /* bounding sphere touches: the shape itself */
-                wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
+                wall_flush(w, kernel, &in, &b, rolling, wf, rec, g0, nrec);
                 double F[3], T[3];
                 if (dem_shaped_wall(w, i, k, xi, F, T)) {
                     mask |= 1u << k;
@@ -263,11 +265,11 @@ static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *re
             b.i[b.n] = i, b.k[b.n] = k, b.c[b.n] = g->mat[i] * DEM_MAX_WALLS + k, b.dist[b.n] = dist;
             b.nx[b.n] = wl->n[0], b.ny[b.n] = wl->n[1], b.nz[b.n] = wl->n[2];
             if (++b.n == WALL_BATCH)
-                wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
+                wall_flush(w, kernel, &in, &b, rolling, wf, rec, g0, nrec);
         }
         g->wall_mask[i] = mask;
     }
-    wall_flush(w, &in, &b, rolling, wf, rec, g0, nrec);
+    wall_flush(w, kernel, &in, &b, rolling, wf, rec, g0, nrec);
     return contacts;
 }
 
@@ -523,12 +525,12 @@ __attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo,
 }
 #endif
 
-/* The AVX2 build of the loop where the CPU has it (and the world does not
- * ask for the portable one): the same bits, as for the pair kernel. */
-static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, bool portable)
+/* The AVX2 build of the loop where avx2 (dem_kernels_avx2): the same bits,
+ * as for the pair kernel. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, int avx2)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
-    if (!portable && __builtin_cpu_supports("avx2"))
+    if (avx2)
         return integrate_avx2(g, lo, hi, dt, maxd2);
 #endif
     return integrate_body(g, lo, hi, dt, maxd2);
@@ -543,7 +545,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     const int nt = w->n_threads;
     const int g0 = w->dist ? w->own_lo : 0, n = w->dist ? w->own_hi : g->n; /* the owned grains */
     const double dt = w->def.dt;
-    const int shaped = w->n_shaped > 0;
+    const int shaped = w->n_shaped > 0, avx2 = dem_kernels_avx2(&w->def);
     double maxd2 = 0.0;
     int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
@@ -552,7 +554,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, g0, n, dt, &maxd2, w->def.portable_kernel);
+        bad = integrate_range(g, g0, n, dt, &maxd2, avx2);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -561,8 +563,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             int tid = dem_thread_id();
             double m2;
             const long no = n - g0;
-            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2,
-                                    w->def.portable_kernel);
+            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2, avx2);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;
         }

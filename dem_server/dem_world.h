@@ -26,6 +26,19 @@ static inline int dem_thread_id(void)
 #endif
 }
 
+/* 1: the vectorised loops (pairs, walls, integration) run their AVX2
+ * builds: the CPU has AVX2 and the world does not ask for the portable
+ * ones (dem_world_def.portable_kernel; the same bits either way). */
+static inline int dem_kernels_avx2(const dem_world_def *def)
+{
+#if defined(__x86_64__) && defined(__GNUC__)
+    return !def->portable_kernel && __builtin_cpu_supports("avx2");
+#else
+    (void)def;
+    return 0;
+#endif
+}
+
 _Static_assert(DEM_MAX_WALLS <= 32, "dem_grains.wall_mask holds one bit per wall");
 
 typedef struct dem_wall {

@@ -208,6 +208,28 @@ static inline void carry_spring(const spring_carry *c, int p)
     c->nori[p] = ti < tj;
 }
 
+/* Makes room for `more` pairs past n in the thread's destination (the list
+ * for the first rows' thread, else tb->rows). Returns 0, -1 when out of
+ * memory. */
+static int rows_room(dem_world *w, dem_thread_buf *tb, int to_list, long n, long more)
+{
+    if (to_list) {
+        if (n + more <= w->pair_cap)
+            return 0;
+        return n + more >= INT_MAX || dem_pairs_reserve(w, (int)(n + more)) ? -1 : 0;
+    }
+    if (n + more <= tb->rows_cap)
+        return 0;
+    long c2 = tb->rows_cap ? 2 * tb->rows_cap : 4096;
+    while (c2 < n + more)
+        c2 *= 2;
+    int *b = realloc(tb->rows, (size_t)c2 * 2 * sizeof *b);
+    if (!b)
+        return -1;
+    tb->rows = b, tb->rows_cap = c2;
+    return 0;
+}
+
 /* The candidate pairs of rows [i0, i1): each grain's neighbours in the 27
  * cells around it, within r_i + r_j + skin, later in the grain order (a
  * left ghost pairs with owned grains only), partners in a fixed cell order.
@@ -215,16 +237,14 @@ static inline void carry_spring(const spring_carry *c, int p)
  * the others into tb->rows; both grow as needed. Returns the count, -1 when
  * out of memory; *n_cross counts the pairs with a ghost. */
 static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb, int to_list,
-                        const int sorted, long *n_cross)
+                        long *n_cross)
 {
     const dem_grains *g = &w->g;
     const int own_lo = w->own_lo, own_hi = w->own_hi;
     const double *x = g->x, *y = g->y, *z = g->z, *r = g->r;
     const int *cell_start = w->cell_start, *cell_items = w->cell_items;
     const double skin = w->skin;
-    int *pi = w->pi, *pj = w->pj;
-    long cap = to_list ? w->pair_cap : tb->rows_cap, n = 0;
-    int *rows = tb->rows;
+    long n = 0;
     for (int i = i0; i < i1; i++) {
         const int jmin = i < own_lo ? own_lo - 1 : i;
         int c = w->grain_cell[i];
@@ -243,12 +263,7 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
                     if (iz < 0 || iz >= gd->n[2])
                         continue;
                     int cc = (ix * gd->n[1] + iy) * gd->n[2] + iz;
-                    /* sorted: cell cc holds the slots cell_start[cc] .. in
-                     * order, so those up to jmin are not even looked at */
-                    int k0 = cell_start[cc];
-                    if (sorted && k0 <= jmin)
-                        k0 = jmin + 1;
-                    for (int k = k0; k < cell_start[cc + 1]; k++) {
+                    for (int k = cell_start[cc]; k < cell_start[cc + 1]; k++) {
                         int j = cell_items[k];
                         if (j <= jmin)
                             continue;
@@ -256,23 +271,12 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
                         double cut = ri + r[j];
                         if (ex * ex + ey * ey + ez * ez >= cut * cut)
                             continue;
-                        if (n == cap) { /* grows at rebuilds only, rarely after the first */
-                            if (to_list) {
-                                if (n >= INT_MAX || dem_pairs_reserve(w, (int)n + 1))
-                                    return -1;
-                                pi = w->pi, pj = w->pj, cap = w->pair_cap;
-                            } else {
-                                long c2 = cap ? 2 * cap : 4096;
-                                int *b = realloc(rows, (size_t)c2 * 2 * sizeof *b);
-                                if (!b)
-                                    return -1;
-                                rows = tb->rows = b, cap = tb->rows_cap = c2;
-                            }
-                        }
+                        if (rows_room(w, tb, to_list, n, 1)) /* grows at rebuilds only, rarely after the first */
+                            return -1;
                         if (to_list)
-                            pi[n] = i, pj[n] = j;
+                            w->pi[n] = i, w->pj[n] = j;
                         else
-                            rows[2 * n] = i, rows[2 * n + 1] = j;
+                            tb->rows[2 * n] = i, tb->rows[2 * n + 1] = j;
                         n++;
                         *n_cross += i < own_lo || j >= own_hi;
                     }
@@ -280,6 +284,56 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
             }
         }
     }
+    return n;
+}
+
+/* search_rows for grains sorted by cell (slot order is cell order, z
+ * fastest): the three cells cz - 1 .. cz + 1 of a column (dx, dy) are one
+ * range of slots, in the order the 27-cell walk takes them, so nine ranges
+ * give the same pairs in the same order; slots up to jmin are cut off each
+ * range's front. Every slot of a range is tested and written, and the count
+ * advanced by the test (no branch on it). */
+static long search_rows_sorted(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb,
+                               int to_list, long *n_cross)
+{
+    const dem_grains *g = &w->g;
+    const int own_lo = w->own_lo, own_hi = w->own_hi;
+    const double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z, *restrict r = g->r;
+    const int *cell_start = w->cell_start;
+    const int n0 = gd->n[0], n1 = gd->n[1], n2 = gd->n[2];
+    const double skin = w->skin;
+    long n = 0, nc = 0;
+    for (int i = i0; i < i1; i++) {
+        const int jmin = i < own_lo ? own_lo - 1 : i;
+        const int c = w->grain_cell[i];
+        const int cz = c % n2, cy = (c / n2) % n1, cx = c / (n2 * n1);
+        const int z0 = cz > 0 ? cz - 1 : 0, z1 = cz + 1 < n2 ? cz + 1 : n2 - 1;
+        const double xi = x[i], yi = y[i], zi = z[i], ri = r[i] + skin;
+        const int left = i < own_lo;
+        for (int ix = cx > 0 ? cx - 1 : 0; ix <= cx + 1 && ix < n0; ix++)
+            for (int iy = cy > 0 ? cy - 1 : 0; iy <= cy + 1 && iy < n1; iy++) {
+                const int col = (ix * n1 + iy) * n2;
+                int k0 = cell_start[col + z0];
+                const int k1 = cell_start[col + z1 + 1];
+                if (k0 <= jmin)
+                    k0 = jmin + 1;
+                if (k0 >= k1)
+                    continue;
+                if (rows_room(w, tb, to_list, n, k1 - k0))
+                    return -1;
+                int *di = to_list ? w->pi : tb->rows, *dj = to_list ? w->pj : tb->rows + 1;
+                const long st = to_list ? 1 : 2;
+                for (int j = k0; j < k1; j++) {
+                    const double ex = xi - x[j], ey = yi - y[j], ez = zi - z[j];
+                    const double cut = ri + r[j];
+                    const int hit = !(ex * ex + ey * ey + ez * ez >= cut * cut);
+                    di[st * n] = i, dj[st * n] = j;
+                    nc += hit & (left | (j >= own_hi));
+                    n += hit;
+                }
+            }
+    }
+    *n_cross += nc;
     return n;
 }
 
@@ -319,8 +373,9 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
     {
         const int t = dem_thread_id();
         dem_thread_buf *tb = &w->tb[t];
-        long n = search_rows(w, &gd, (int)((long)own_hi * t / t_n), (int)((long)own_hi * (t + 1) / t_n), tb, t == 0,
-                             sorted, &n_cross);
+        const int i0 = (int)((long)own_hi * t / t_n), i1 = (int)((long)own_hi * (t + 1) / t_n);
+        long n = sorted ? search_rows_sorted(w, &gd, i0, i1, tb, t == 0, &n_cross)
+                        : search_rows(w, &gd, i0, i1, tb, t == 0, &n_cross);
         nomem |= n < 0;
         tb->rows_n = n < 0 ? 0 : n;
     }

@@ -20,6 +20,12 @@ typedef struct fem_solver {
     double lambda, mu, rho;
     double alpha, beta;    /* Rayleigh damping C = alpha M + beta K */
     cholmod_sparse *K;     /* full symmetric storage (stype 0): columns == rows */
+    /* K again by 3 x 3 node blocks (fem_solver.c, "K by node blocks"): node
+     * row n holds the blocks kb_col[kb_start[n] .. kb_start[n + 1]), 9
+     * values each, row-major, in K's own order; NULL when K's pattern is
+     * not whole blocks (the products then read K) */
+    int32_t *kb_start, *kb_col;
+    double *kb_val;
     double *mass;          /* lumped mass per dof [kg] (eq. 33 row sums) */
     double *inv_mass;      /* 1/m on free dofs, 0 on fixed ones */
     uint8_t *fixed;        /* per dof: 1 = Dirichlet */

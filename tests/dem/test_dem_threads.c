@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include "dem_bed.h"
+#include "dem_world.h"
 #include "test_dem_common.h"
 #include "timer.h"
 
@@ -203,7 +204,76 @@ static int same_bits_two_materials(void)
     return 0;
 }
 
-static const test_case tests[] = {{"same_bits_two_materials", same_bits_two_materials},
+/* The neighbour list against brute force: a cloud of grains of three sizes
+ * (cells of several grains, grains on cell and grid edges), searched with
+ * the grains sorted by cell (the column ranges of dem_grid.c) and unsorted
+ * (the 27-cell walk), on 1 and 2 threads: every pair within r_i + r_j +
+ * skin once, no other, rows in ascending i. */
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+static int neighbour_list_brute_force(void)
+{
+    enum { N = 6000 };
+    static double pos[N][3], rad[N];
+    uint32_t seed = 7u;
+    for (int i = 0; i < N; i++) {
+        for (int a = 0; a < 3; a++) {
+            seed = seed * 1664525u + 1013904223u;
+            pos[i][a] = 0.06 * (double)(seed >> 8) / 16777216.0 * (a == 2 ? 0.5 : 1.0);
+        }
+        rad[i] = i % 3 == 0 ? 1.5e-3 : (i % 3 == 1 ? 1.0e-3 : 0.6e-3);
+    }
+    dem_material m = test_material(5e7, 0.3, 0.5, 0.4);
+    uint64_t *want = malloc((size_t)N * 64 * sizeof *want), *got = malloc((size_t)N * 64 * sizeof *got);
+    ENSURE(want && got);
+    long nw = 0;
+    const double skin = 0.3 * 0.6e-3; /* the default: 0.3 r_min */
+    for (int i = 0; i < N; i++)
+        for (int j = i + 1; j < N; j++) {
+            double ex = pos[i][0] - pos[j][0], ey = pos[i][1] - pos[j][1], ez = pos[i][2] - pos[j][2];
+            double cut = rad[i] + skin + rad[j];
+            if (ex * ex + ey * ey + ez * ez < cut * cut) {
+                ENSURE(nw < (long)N * 64);
+                want[nw++] = (uint64_t)i << 32 | (uint64_t)j; /* grains added in order: tag = index */
+            }
+        }
+    qsort(want, (size_t)nw, sizeof *want, cmp_u64);
+    for (int k = 0; k < 4; k++) {
+        const int sorted = k & 1, threads = 1 + (k >> 1);
+        dem_world_def d = dem_world_def_default();
+        d.dt = 1e-7, d.max_grains = N, d.threads = threads, d.reorder_every = sorted;
+        dem_world *w = NULL;
+        cm_error err = {0};
+        ENSURE(dem_world_create(&d, 1, &m, &w, &err) == 0);
+        for (int i = 0; i < N; i++)
+            ENSURE(dem_grain_add(w, pos[i], rad[i], 0, NULL, &err) == 0);
+        ENSURE(dem_world_prepare(w, &err) == 0);
+        ENSURE(w->skin == skin);
+        ENSURE(dem_neighbour_rebuild(w, &err) == 0);
+        ENSURE(w->n_pairs == nw);
+        for (int p = 0; p < w->n_pairs; p++) {
+            int ti = w->g.tag[w->pi[p]], tj = w->g.tag[w->pj[p]];
+            got[p] = ti < tj ? (uint64_t)ti << 32 | (uint64_t)tj : (uint64_t)tj << 32 | (uint64_t)ti;
+            ENSURE(p == 0 || w->pi[p] >= w->pi[p - 1]);
+            ENSURE(w->pj[p] > w->pi[p]);
+        }
+        qsort(got, (size_t)nw, sizeof *got, cmp_u64);
+        ENSURE(memcmp(got, want, (size_t)nw * sizeof *got) == 0);
+        printf("%s, %d thread%s: %ld pairs as brute force\n", sorted ? "sorted" : "unsorted", threads,
+               threads > 1 ? "s" : "", nw);
+        dem_world_destroy(&w);
+    }
+    free(want);
+    free(got);
+    return 0;
+}
+
+static const test_case tests[] = {{"neighbour_list_brute_force", neighbour_list_brute_force},
+                                  {"same_bits_two_materials", same_bits_two_materials},
                                   {"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
                                   {"same_bits_stirred", same_bits_stirred},
                                   {"same_bits_with_surface", same_bits_with_surface},

@@ -654,6 +654,49 @@ static int explicit_stability_tire(void)
     return 0;
 }
 
+/* K by node blocks (fem_solver.c): on the tire with linear and quadratic
+ * elements the pattern is whole 3 x 3 blocks, and the block product gives
+ * the bits of the entry-wise one (each row in K's stored order), written
+ * out here from K's own arrays. */
+static int k_node_blocks(void)
+{
+    const fem_element_type els[] = {FEM_ELEMENT_TET4, FEM_ELEMENT_TET10};
+    for (int k = 0; k < 2; k++) {
+        fem_config c = fem_config_default();
+        c.tire.resolution = 0.25;
+        c.element = els[k];
+        c.integrator = FEM_INTEGRATOR_EXPLICIT;
+        c.dt = 1e-7;
+        fem_model *m;
+        cm_error err = {0};
+        ENSURE_MSG(fem_create(&c, &m, &err) == CM_OK, "%s", err.msg);
+        const fem_solver *s = m->s;
+        ENSURE(s->kb_start && s->kb_col && s->kb_val);
+        const int n = s->n_dof, *Kp = s->K->p, *Ki = s->K->i;
+        const double *Kx = s->K->x;
+        ENSURE(s->kb_start[n / 3] * 9 == Kp[n]); /* every entry of K in a block */
+        double *x = malloc((size_t)n * sizeof *x), *y = malloc((size_t)n * sizeof *y);
+        ENSURE(x && y);
+        for (int d = 0; d < n; d++)
+            x[d] = rnd() * (d % 7 == 0 ? 1e3 : 1.0); /* magnitudes apart: rounding depends on the order */
+        fem_solver_matvec(s, x, y);
+        long same = 0;
+        for (int r = 0; r < n; r++) {
+            double acc = 0.0;
+            for (int q = Kp[r]; q < Kp[r + 1]; q++)
+                acc += Kx[q] * x[Ki[q]];
+            same += memcmp(&acc, &y[r], sizeof acc) == 0;
+        }
+        printf("  %s tire: %d dofs, %d blocks, %ld of %d rows bit for bit\n", k ? "tet10" : "tet4", n,
+               s->kb_start[n / 3], same, n);
+        ENSURE(same == n);
+        free(x);
+        free(y);
+        fem_destroy(&m);
+    }
+    return 0;
+}
+
 /* The model refuses dt above the limit unless allow_unstable. */
 static int explicit_refuses_unstable_dt(void)
 {
@@ -1969,6 +2012,7 @@ int main(int argc, char **argv)
         {"explicit_stability_limit", explicit_stability_limit},
         {"explicit_stability_tire", explicit_stability_tire},
         {"explicit_refuses_unstable_dt", explicit_refuses_unstable_dt},
+        {"k_node_blocks", k_node_blocks},
         {"cholmod_vs_cg", cholmod_vs_cg},
         {"gmsh_reader", gmsh_reader},
         {"gmsh_malformed", gmsh_malformed},

@@ -50,9 +50,10 @@ static int whole_blocks(const cholmod_sparse *K, int n, int *nb)
     return 1;
 }
 
-/* Fills s->kb_*; K's pattern not of whole blocks leaves them NULL (CM_OK).
- * Returns nonzero only when out of memory. */
-static int blocks_of_k(fem_solver *s)
+/* Fills s->kb_* from K, whose pattern is whole blocks by the assembly
+ * (every element adds its whole matrix, both triangles are stored): a node
+ * whose rows are not is an error of the assembly, named. */
+static int blocks_of_k(fem_solver *s, cm_error *err)
 {
     const cholmod_sparse *K = s->K;
     const int nn = s->n_dof / 3, *Kp = K->p, *Ki = K->i;
@@ -60,14 +61,14 @@ static int blocks_of_k(fem_solver *s)
     int total = 0;
     for (int n = 0, nb; n < nn; n++) {
         if (!whole_blocks(K, n, &nb))
-            return 0;
+            return cm_fail(err, CM_ERR_STATE, "fem solver: the rows of node %d of K are not whole 3 x 3 blocks", n);
         total += nb;
     }
     s->kb_start = malloc(((size_t)nn + 1) * sizeof *s->kb_start);
     s->kb_col = malloc((size_t)total * sizeof *s->kb_col);
     s->kb_val = malloc(9 * (size_t)total * sizeof *s->kb_val);
     if (!s->kb_start || !s->kb_col || !s->kb_val)
-        return 1;
+        return cm_fail(err, CM_ERR_NOMEM, "fem solver: out of memory for K's %d node blocks", total);
     s->kb_start[0] = 0;
     for (int n = 0; n < nn; n++) {
         const int b0 = s->kb_start[n], nb = (Kp[3 * n + 1] - Kp[3 * n]) / 3;
@@ -218,9 +219,10 @@ int fem_solver_create(const fem_mesh *m, double E, double nu, double rho, double
         fem_solver_destroy(&s);
         return rc;
     }
-    if (blocks_of_k(s)) {
+    int rc = blocks_of_k(s, err);
+    if (rc) {
         fem_solver_destroy(&s);
-        return cm_fail(err, CM_ERR_NOMEM, "fem solver: out of memory for K's node blocks");
+        return rc;
     }
     *out = s;
     return fem_solver_constrain(s, s->fixed, NULL, err);
@@ -316,23 +318,10 @@ int fem_solver_constrain_rim(fem_solver *s, const fem_mesh *m, cm_error *err)
 
 void fem_solver_matvec(const fem_solver *s, const double *x, double *y)
 {
-    if (s->kb_val) {
-        FEM_OMP_FOR
-        for (int n = 0; n < s->n_dof / 3; n++)
-            block_row(s, n, x, y + 3 * n);
-        return;
-    }
-    const int *Kp = s->K->p, *Ki = s->K->i;
-    const double *Kx = s->K->x;
-    int n = s->n_dof;
-    /* K is symmetric and stored whole: column j read as row j (gather). */
+    /* K is symmetric and stored whole: column j read as row j (gather) */
     FEM_OMP_FOR
-    for (int r = 0; r < n; r++) {
-        double acc = 0.0;
-        for (int p = Kp[r]; p < Kp[r + 1]; p++)
-            acc += Kx[p] * x[Ki[p]];
-        y[r] = acc;
-    }
+    for (int n = 0; n < s->n_dof / 3; n++)
+        block_row(s, n, x, y + 3 * n);
 }
 
 static double dot_free(const fem_solver *s, const double *a, const double *b)
@@ -619,19 +608,15 @@ static void nh_internal_force(fem_solver *s, const double *u, double *y)
     }
 }
 
-/* y += beta K x (Rayleigh stiffness damping on the small-strain K). */
-static void add_beta_k(const fem_solver *s, const double *x, double *y)
+/* y += beta K x (Rayleigh stiffness damping on the small-strain K), K x
+ * in s->ku: the Neo-Hookean step leaves no K u there (ku_valid stays 0). */
+static void add_beta_k(fem_solver *s, const double *x, double *y)
 {
     if (s->beta == 0.0)
         return;
-    const int *Kp = s->K->p, *Ki = s->K->i;
-    const double *Kx = s->K->x;
-    for (int r = 0; r < s->n_dof; r++) {
-        double acc = 0.0;
-        for (int p = Kp[r]; p < Kp[r + 1]; p++)
-            acc += Kx[p] * x[Ki[p]];
-        y[r] += s->beta * acc;
-    }
+    fem_solver_matvec(s, x, s->ku);
+    for (int r = 0; r < s->n_dof; r++)
+        y[r] += s->beta * s->ku[r];
 }
 
 void fem_solver_set_state(fem_solver *s, const double *u, const double *v)
@@ -745,26 +730,21 @@ static void step_explicit(fem_solver *s, double h)
         if (beta != 0.0)
             s->w[d] = u[d] + beta * v[d];
     }
+    double *kw = s->ku; /* the internal forces: K w, or the Neo-Hookean ones (and beta K v) */
     if (s->nh) {
-        /* the same step with the Neo-Hookean internal forces for K u */
         nh_internal_force(s, u, s->tmp);
         add_beta_k(s, v, s->tmp);
-        for (int r = 0; r < n; r++) {
-            double ar = im[r] * (f[r] - s->tmp[r]) - (im[r] != 0.0 ? alpha * v[r] : 0.0);
-            a[r] = ar;
-            v[r] += hh * ar;
-        }
-        return;
+        kw = s->tmp;
+    } else {
+        fem_solver_matvec(s, w, kw);
     }
-    double *kw = s->ku;
-    fem_solver_matvec(s, w, kw);
     FEM_OMP_FOR
     for (int r = 0; r < n; r++) {
         double ar = im[r] * (f[r] - kw[r]) - (im[r] != 0.0 ? alpha * v[r] : 0.0); /* eq. 32 */
         a[r] = ar;
         v[r] += hh * ar;
     }
-    s->ku_valid = beta == 0.0; /* w is u: kw is K u, the same sums as fem_solver_matvec */
+    s->ku_valid = !s->nh && beta == 0.0; /* w is u: kw is K u */
 }
 
 /* Newmark average acceleration in increments: with du = u+ - u,

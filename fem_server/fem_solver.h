@@ -20,10 +20,9 @@ typedef struct fem_solver {
     double lambda, mu, rho;
     double alpha, beta;    /* Rayleigh damping C = alpha M + beta K */
     cholmod_sparse *K;     /* full symmetric storage (stype 0): columns == rows */
-    /* K again by 3 x 3 node blocks (fem_solver.c, "K by node blocks"): node
-     * row n holds the blocks kb_col[kb_start[n] .. kb_start[n + 1]), 9
-     * values each, row-major, in K's own order; NULL when K's pattern is
-     * not whole blocks (the products then read K) */
+    /* K again by 3 x 3 node blocks (fem_solver.c, "K by node blocks"), what
+     * fem_solver_matvec reads: node row n holds the blocks kb_col[kb_start[n]
+     * .. kb_start[n + 1]), 9 values each, row-major, in K's own order */
     int32_t *kb_start, *kb_col;
     double *kb_val;
     double *mass;          /* lumped mass per dof [kg] (eq. 33 row sums) */

@@ -480,11 +480,9 @@ static void wheel_move(fem_wheel *w, double dt)
 /* E_kin + E_el - b_pressure.u, J (rim frame). */
 static double mechanical_energy(const fem_model *m)
 {
-    const fem_solver *s = m->s;
-    double pu = 0.0;
-    for (int d = 0; d < s->n_dof; d++)
-        pu += m->b_pressure[d] * s->u[d];
-    return fem_solver_kinetic_energy(s) + fem_solver_elastic_energy(s) - pu;
+    double e[3];
+    fem_solver_energies(m->s, m->b_pressure, e);
+    return e[1] + e[0] - e[2];
 }
 
 int fem_advance(fem_model *m, const double *f_iface, double interval, cm_error *err)
@@ -664,12 +662,11 @@ int fem_get_stability(const fem_model *m, fem_stability *s)
 
 void fem_get_energy(const fem_model *m, fem_energy *e)
 {
-    e->elastic = fem_solver_elastic_energy(m->s);
-    e->kinetic = fem_solver_kinetic_energy(m->s);
-    double acc = 0.0;
-    for (int d = 0; d < m->s->n_dof; d++)
-        acc += m->s->f[d] * m->s->u[d];
-    e->load_potential = -acc;
+    double en[3];
+    fem_solver_energies(m->s, m->s->f, en);
+    e->elastic = en[0];
+    e->kinetic = en[1];
+    e->load_potential = -en[2];
 }
 
 void fem_rim_reaction(const fem_model *m, double force[3], double torque[3])

@@ -833,3 +833,29 @@ double fem_solver_kinetic_energy(const fem_solver *s)
         acc += s->mass[d] * s->v[d] * s->v[d];
     return 0.5 * acc;
 }
+
+void fem_solver_energies(const fem_solver *s, const double *load, double e[3])
+{
+    const int n = s->n_dof;
+    const double *restrict u = s->u, *restrict v = s->v, *restrict mass = s->mass, *restrict ku = s->ku;
+    double acc_e = 0.0, acc_k = 0.0, acc_l = 0.0;
+    if (!s->nh && s->ku_valid && load) {
+        /* the three sums of fem_solver_elastic_energy, _kinetic_energy and
+         * load^T u, each in its order, in one loop: each add waits only
+         * for its own sum (three passes waited for one chain at a time) */
+        for (int d = 0; d < n; d++) {
+            acc_e += u[d] * ku[d];
+            acc_k += mass[d] * v[d] * v[d];
+            acc_l += load[d] * u[d];
+        }
+        e[0] = 0.5 * acc_e;
+        e[1] = 0.5 * acc_k;
+        e[2] = acc_l;
+        return;
+    }
+    for (int d = 0; load && d < n; d++)
+        acc_l += load[d] * u[d];
+    e[0] = fem_solver_elastic_energy(s);
+    e[1] = fem_solver_kinetic_energy(s);
+    e[2] = acc_l;
+}

@@ -114,5 +114,9 @@ int fem_solver_step(fem_solver *s, double h, cm_error *err);
 
 double fem_solver_elastic_energy(const fem_solver *s);  /* 1/2 u^T K u (Neo-Hookean: sum V0 W(F)), uses s->tmp */
 double fem_solver_kinetic_energy(const fem_solver *s);  /* 1/2 v^T M v */
+/* The three at once, J: e[0] elastic and e[1] kinetic as above, e[2] =
+ * load^T u (load NULL: 0). One pass over the dofs where the explicit step
+ * left K u (each sum in the order of its own function: the same bits). */
+void fem_solver_energies(const fem_solver *s, const double *load, double e[3]);
 
 #endif

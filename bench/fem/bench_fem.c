@@ -146,6 +146,29 @@ int main(int argc, char **argv)
     }
     double t_explicit = median(te, blocks), t_csr = median(tc, blocks);
 
+    /* the energies after an explicit step (coupled runs: every exchange):
+     * one pass (fem_solver_energies) vs the three sums one after another,
+     * interleaved blocks; the same bits (test_fem.energies_one_pass) */
+    double t1p[32], t3p[32], sink = 0.0;
+    for (int b = 0; b < blocks; b++) {
+        double e[3];
+        t0 = cm_now();
+        for (int k = 0; k < per; k++) {
+            fem_solver_energies(s, s->f, e);
+            sink += e[0] + e[1] + e[2];
+        }
+        t1p[b] = (cm_now() - t0) / per;
+        t0 = cm_now();
+        for (int k = 0; k < per; k++) {
+            double fu = 0.0;
+            for (int d = 0; d < n; d++)
+                fu += s->f[d] * s->u[d];
+            sink += fem_solver_elastic_energy(s) + fem_solver_kinetic_energy(s) + fu;
+        }
+        t3p[b] = (cm_now() - t0) / per;
+    }
+    double t_en1 = median(t1p, blocks), t_en3 = median(t3p, blocks);
+
     /* Newmark: factorization of K_eff, then steps */
     double hn = 1e-4;
     t0 = cm_now();
@@ -187,6 +210,7 @@ int main(int argc, char **argv)
     fprintf(fp, "dt_estimate,%.6g,s\ndt_power,%.6g,s\ndt_gershgorin,%.6g,s\n", st.dt_estimate, st.dt_power,
             st.dt_gershgorin);
     fprintf(fp, "explicit_cost_per_simulated_second,%.6g,s\n", t_explicit / h);
+    fprintf(fp, "energies_one_pass,%.6g,s\nenergies_three_passes,%.6g,s\n", t_en1, t_en3);
     fclose(fp);
     printf("fem bench (%d threads, %s): %d tets, %d dofs; explicit step %.1f us vs CSR floor %.1f us (x%.2f); "
            "dt_power %.4g s, %.3g s per simulated second; "
@@ -194,6 +218,8 @@ int main(int argc, char **argv)
            threads, element, ne, n, 1e6 * t_explicit, 1e6 * t_csr, t_explicit / t_csr, st.dt_power, t_explicit / h,
            1e3 * t_newmark, t_factor_eff,
            t_static, t_cg, cg_iters);
+    printf("energies after a step: one pass %.1f us, three passes %.1f us (x%.2f)%s\n", 1e6 * t_en1, 1e6 * t_en3,
+           t_en3 / t_en1, sink == 0.0 ? " (all zero)" : "");
     free(x);
     free(y);
     fem_destroy(&m);

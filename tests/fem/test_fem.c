@@ -697,6 +697,56 @@ static int k_node_blocks(void)
     return 0;
 }
 
+/* fem_solver_energies: in one pass after an explicit step (K u left by the
+ * step) the same bits as the elastic and kinetic energies' own functions
+ * and as load^T u summed here; without a load, the separate functions;
+ * the elastic energy also against 1/2 u^T K u from K's entries. */
+static int energies_one_pass(void)
+{
+    fem_config c = fem_config_default();
+    c.tire.resolution = 0.25;
+    c.integrator = FEM_INTEGRATOR_EXPLICIT;
+    c.dt = 1e-7;
+    fem_model *m;
+    cm_error err = {0};
+    ENSURE_MSG(fem_create(&c, &m, &err) == CM_OK, "%s", err.msg);
+    fem_solver *s = m->s;
+    const int n = s->n_dof;
+    double *u = malloc((size_t)n * sizeof *u), *v = malloc((size_t)n * sizeof *v);
+    ENSURE(u && v);
+    for (int d = 0; d < n; d++) {
+        u[d] = 1e-4 * rnd() * (d % 7 == 0 ? 1e3 : 1.0); /* magnitudes apart: rounding depends on the order */
+        v[d] = 0.1 * rnd();
+        s->f[d] = rnd() * (d % 5 == 0 ? 1e2 : 1.0);
+    }
+    fem_solver_set_state(s, u, v);
+    ENSURE_MSG(fem_solver_prepare(s, FEM_INTEGRATOR_EXPLICIT, 1e-7, &err) == CM_OK, "%s", err.msg);
+    ENSURE_MSG(fem_solver_step(s, 1e-7, &err) == CM_OK, "%s", err.msg);
+    ENSURE(s->ku_valid);
+    double e[3], e0[3], fu = 0.0, uku = 0.0;
+    fem_solver_energies(s, s->f, e);
+    for (int d = 0; d < n; d++)
+        fu += s->f[d] * s->u[d];
+    const double el = fem_solver_elastic_energy(s), ke = fem_solver_kinetic_energy(s);
+    ENSURE(memcmp(&e[0], &el, sizeof el) == 0);
+    ENSURE(memcmp(&e[1], &ke, sizeof ke) == 0);
+    ENSURE(memcmp(&e[2], &fu, sizeof fu) == 0);
+    fem_solver_energies(s, NULL, e0);
+    ENSURE(memcmp(e0, e, 2 * sizeof *e) == 0 && e0[2] == 0.0);
+    const int *Kp = s->K->p, *Ki = s->K->i;
+    const double *Kx = s->K->x;
+    for (int r = 0; r < n; r++)
+        for (int q = Kp[r]; q < Kp[r + 1]; q++)
+            uku += s->u[r] * Kx[q] * s->u[Ki[q]];
+    printf("  elastic %.17g J (entry-wise %.17g), kinetic %.17g J, f.u %.17g J\n", e[0], 0.5 * uku, e[1], e[2]);
+    ENSURE(e[0] > 0.0 && e[1] > 0.0);
+    ENSURE_NEAR(e[0], 0.5 * uku, 1e-10 * e[0]);
+    free(u);
+    free(v);
+    fem_destroy(&m);
+    return 0;
+}
+
 /* The model refuses dt above the limit unless allow_unstable. */
 static int explicit_refuses_unstable_dt(void)
 {
@@ -2013,6 +2063,7 @@ int main(int argc, char **argv)
         {"explicit_stability_tire", explicit_stability_tire},
         {"explicit_refuses_unstable_dt", explicit_refuses_unstable_dt},
         {"k_node_blocks", k_node_blocks},
+        {"energies_one_pass", energies_one_pass},
         {"cholmod_vs_cg", cholmod_vs_cg},
         {"gmsh_reader", gmsh_reader},
         {"gmsh_malformed", gmsh_malformed},

@@ -26,6 +26,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "dem_world.h"
 #include "vec3.h"
@@ -41,6 +44,7 @@ typedef struct pair_arrays {
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
     int one_c;          /* every grain of one material: the pairs' coefficient index (dem_pair_plan.one_c), else -1 */
+    int avx2;           /* the candidates' test in its AVX2 build (dem_kernels_avx2) */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -49,7 +53,7 @@ static pair_arrays pair_arrays_of(dem_world *w)
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
                      w->pj,    w->hist_val[w->hist_cur],   w->held,  w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c};
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c, dem_kernels_avx2(&w->def)};
     return a;
 }
 
@@ -426,24 +430,32 @@ static batch_fn batch_kernel(const dem_world *w)
 static inline __attribute__((always_inline)) void batch_scatter_body(const pair_arrays *a, const force_sums *s,
                                                                       const pair_batch *b, const int spring)
 {
-    const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
-    int si = 0, s_next = b->n_st > 0 ? b->st_k[0] : INT_MAX;
-    for (int k = 0; k < b->n; k++) {
+    /* the pointers in locals: the stores into held (bytes, which may alias
+     * anything) would otherwise reload them from a and s on every pair */
+    const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL, n = b->n, n_st = b->n_st;
+    double *restrict hist = a->hist;
+    unsigned char *restrict held = a->held;
+    double *restrict fx = s->fx, *restrict fy = s->fy, *restrict fz = s->fz;
+    double *restrict tx = s->tx, *restrict ty = s->ty, *restrict tz = s->tz;
+    int si = 0, s_next = n_st > 0 ? b->st_k[0] : INT_MAX;
+    for (int k = 0; k < n; k++) {
         int p = b->p[k], i = b->i[k], j = b->j[k];
         if (k == s_next) { /* a stored cross pair: its force and torque on i alone */
             add_i(s, i, b->cf + (size_t)DEM_PAIR_F * b->st_c[si]);
-            s_next = ++si < b->n_st ? b->st_k[si] : INT_MAX;
+            s_next = ++si < n_st ? b->st_k[si] : INT_MAX;
             continue;
         }
-        double *xi = a->hist + (size_t)hs * p;
+        double *xi = hist + (size_t)hs * p;
         xi[0] = b->sx[k], xi[1] = b->sy[k], xi[2] = b->sz[k];
         if (spring)
             xi[3] = b->ux[k], xi[4] = b->uy[k], xi[5] = b->uz[k];
-        a->held[p] = (unsigned char)row_held(xi, hs);
-        double f[DEM_PAIR_F] = {b->fx[k],  b->fy[k],  b->fz[k],  b->tix[k], b->tiy[k],
-                                b->tiz[k], b->tjx[k], b->tjy[k], b->tjz[k]};
-        add_i(s, i, f);
-        add_j(s, j, f);
+        held[p] = (unsigned char)row_held(xi, hs);
+        /* add_i and add_j through the locals */
+        const double f0 = b->fx[k], f1 = b->fy[k], f2 = b->fz[k];
+        fx[i] += f0, fy[i] += f1, fz[i] += f2;
+        tx[i] += b->tix[k], ty[i] += b->tiy[k], tz[i] += b->tiz[k];
+        fx[j] -= f0, fy[j] -= f1, fz[j] -= f2;
+        tx[j] += b->tjx[k], ty[j] += b->tjy[k], tz[j] += b->tjz[k];
     }
 }
 
@@ -471,6 +483,97 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
 
 /* ---- the stage --------------------------------------------------------- */
 
+#if defined(__x86_64__) && defined(__GNUC__)
+/* Where the contacts of a group of four candidates go: for each mask of
+ * lanes in contact, the lanes in ascending order, first as 32-bit lanes
+ * (the indices), then as pairs of 32-bit lanes (the doubles); and how many. */
+static const int32_t pack32[16][8] = {
+    {0}, {0}, {1}, {0, 1}, {2}, {0, 2}, {1, 2}, {0, 1, 2}, {3}, {0, 3}, {1, 3}, {0, 1, 3}, {2, 3}, {0, 2, 3},
+    {1, 2, 3}, {0, 1, 2, 3}};
+static const int32_t pack64[16][8] = {{0},
+                                      {0, 1},
+                                      {2, 3},
+                                      {0, 1, 2, 3},
+                                      {4, 5},
+                                      {0, 1, 4, 5},
+                                      {2, 3, 4, 5},
+                                      {0, 1, 2, 3, 4, 5},
+                                      {6, 7},
+                                      {0, 1, 6, 7},
+                                      {2, 3, 6, 7},
+                                      {0, 1, 2, 3, 6, 7},
+                                      {4, 5, 6, 7},
+                                      {0, 1, 4, 5, 6, 7},
+                                      {2, 3, 4, 5, 6, 7},
+                                      {0, 1, 2, 3, 4, 5, 6, 7}};
+static const unsigned char pack_n[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+
+/* fill's test four candidates at a time (AVX2): the same operations on
+ * each lane in the same order (no fused multiply-add), so the same bits;
+ * the lanes in contact packed to the batch's end in pair order (a table
+ * permutation). Stops four short of a full batch or of pe (fill does the
+ * rest); returns the next p. The grains' values are loaded lane by lane:
+ * the gather instructions made it 10 % slower than the scalar test on
+ * these CPUs (AMD Zen 4); this way the pair stage is ~5 % faster. */
+__attribute__((target("avx2"))) static int fill_avx2(const pair_arrays *a, pair_batch *restrict b, int p,
+                                                      const int pe, const int hs, const int one_mat)
+{
+    const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
+    const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
+    unsigned char *restrict held = a->held;
+    const __m128i c_one = _mm_set1_epi32(a->one_c), nmat = _mm_set1_epi32(DEM_MAX_MATERIALS);
+    const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
+    const __m256d zero = _mm256_setzero_pd();
+    int n = b->n;
+    for (; p + 4 <= pe && n <= BATCH - 4; p += 4) {
+        const __m128i vi = _mm_loadu_si128((const __m128i *)(pi + p)), vj = _mm_loadu_si128((const __m128i *)(pj + p));
+        const int i0 = pi[p], i1 = pi[p + 1], i2 = pi[p + 2], i3 = pi[p + 3];
+        const int j0 = pj[p], j1 = pj[p + 1], j2 = pj[p + 2], j3 = pj[p + 3];
+#define LANES(v, a, b, c, d) _mm256_setr_pd(v[a], v[b], v[c], v[d])
+        const __m256d ex = _mm256_sub_pd(LANES(x, i0, i1, i2, i3), LANES(x, j0, j1, j2, j3));
+        const __m256d ey = _mm256_sub_pd(LANES(y, i0, i1, i2, i3), LANES(y, j0, j1, j2, j3));
+        const __m256d ez = _mm256_sub_pd(LANES(z, i0, i1, i2, i3), LANES(z, j0, j1, j2, j3));
+        const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)),
+                                         _mm256_mul_pd(ez, ez));
+        const __m256d rs = _mm256_add_pd(LANES(r, i0, i1, i2, i3), LANES(r, j0, j1, j2, j3));
+#undef LANES
+        const __m256d apart =
+            _mm256_or_pd(_mm256_cmp_pd(d2, _mm256_mul_pd(rs, rs), _CMP_GE_OQ), _mm256_cmp_pd(d2, zero, _CMP_EQ_OQ));
+        const int m_apart = _mm256_movemask_pd(apart), m = ~m_apart & 15;
+        uint32_t h;
+        memcpy(&h, held + p, sizeof h); /* held is 0 or 1 per pair */
+        const int m_held = (int)((h & 1u) | (h >> 7 & 2u) | (h >> 14 & 4u) | (h >> 21 & 8u));
+        if (m_apart & m_held) /* a spring to clear (rare) */
+            for (int k = 0; k < 4; k++)
+                if (m_apart & m_held & 1 << k) {
+                    memset(a->hist + (size_t)hs * (p + k), 0, (size_t)hs * sizeof(double));
+                    held[p + k] = 0;
+                }
+        const __m256i q64 = _mm256_loadu_si256((const __m256i *)pack64[m]);
+        const __m256i q32 = _mm256_loadu_si256((const __m256i *)pack32[m]);
+        const __m128i mi = _mm_setr_epi32(mat[i0], mat[i1], mat[i2], mat[i3]);
+        const __m128i vc = one_mat ? c_one
+                                   : _mm_add_epi32(_mm_mullo_epi32(mi, nmat),
+                                                   _mm_setr_epi32(mat[j0], mat[j1], mat[j2], mat[j3]));
+#define PACK32(v) _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castsi128_si256(v), q32))
+#define PACK64(v) _mm256_castsi256_pd(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(v), q64))
+        _mm_storeu_si128((__m128i *)(b->p + n), PACK32(_mm_add_epi32(_mm_set1_epi32(p), lane)));
+        _mm_storeu_si128((__m128i *)(b->i + n), PACK32(vi));
+        _mm_storeu_si128((__m128i *)(b->j + n), PACK32(vj));
+        _mm_storeu_si128((__m128i *)(b->c + n), PACK32(vc));
+        _mm256_storeu_pd(b->ex + n, PACK64(ex));
+        _mm256_storeu_pd(b->ey + n, PACK64(ey));
+        _mm256_storeu_pd(b->ez + n, PACK64(ez));
+        _mm256_storeu_pd(b->d2 + n, PACK64(d2));
+#undef PACK32
+#undef PACK64
+        n += pack_n[m];
+    }
+    b->n = n;
+    return p;
+}
+#endif
+
 /* Candidate pairs through the contact test, without a branch on its
  * outcome (in a settled bed about half the candidates touch, a coin a
  * branch predictor cannot call): each pair is written into the batch's next
@@ -481,10 +584,15 @@ static inline __attribute__((always_inline)) void batch_scatter(const pair_array
  * Nothing in the loop calls out, so the batch's count and the arrays stay
  * in registers. one_mat: the grains are all of one material, every pair's
  * coefficient index is a->one_c (no lookups). */
+
 static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair_batch *restrict b, int p,
                                                        const int pe, const int spring, const int one_mat)
 {
     const int hs = spring ? DEM_HIST_MAX : DEM_HIST_TANGENTIAL;
+#if defined(__x86_64__) && defined(__GNUC__)
+    if (a->avx2)
+        p = fill_avx2(a, b, p, pe, hs, one_mat);
+#endif
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     double *restrict hist = a->hist;

@@ -28,7 +28,8 @@ typedef struct bed_case {
     bool stirred, surface, frozen;
     bool portable; /* the pair kernel's portable path even where the CPU has AVX2 */
     bool spring;   /* DEM_ROLLING_SPRING instead of the constant torque */
-    int two_mat;   /* two materials alike, the grains of the first (1) or of both, alternately (2) */
+    int two_mat;   /* two materials alike, the grains of the first (1) or of both, alternately (2); two
+                      different materials, alternately (3) */
 } bed_case;
 
 static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, double *wall_s)
@@ -48,7 +49,10 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
     ENSURE(test_two_layer_box(w, 0.04, 0.04, n) == 0);
     if (c.two_mat) { /* the same grains and walls in a world of two materials alike */
-        const dem_material mats[2] = {m, m};
+        dem_material m2 = m;
+        if (c.two_mat == 3) /* softer, rougher, rolling less */
+            m2.young *= 0.5, m2.friction = 0.6, m2.rolling_friction = 0.02;
+        const dem_material mats[2] = {m, m2};
         dem_world *w2 = NULL;
         ENSURE_MSG(dem_world_create(&d, 2, mats, &w2, &err) == 0, "%s", err.msg);
         ENSURE(test_box_walls(w2, 0.04, 0.04, 1) == 0);
@@ -56,7 +60,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
             dem_grain_state gs;
             int id2;
             ENSURE(dem_grain_get(w, id, &gs) == 0);
-            ENSURE_MSG(dem_grain_add(w2, gs.x, gs.radius, c.two_mat == 2 ? id % 2 : 0, &id2, &err) == 0, "%s",
+            ENSURE_MSG(dem_grain_add(w2, gs.x, gs.radius, c.two_mat >= 2 ? id % 2 : 0, &id2, &err) == 0, "%s",
                        err.msg);
             ENSURE(id2 == id);
         }
@@ -204,6 +208,34 @@ static int same_bits_two_materials(void)
     return 0;
 }
 
+/* Two different materials, alternately: every pair's coefficients looked
+ * up by its two grains (a lookup by the wrong grain gives a 0–1 pair the
+ * coefficients of 0–0 or 1–1): the batched kernel with its AVX2 candidate
+ * test, its portable path and two threads give the same bits, and not those
+ * of the two materials alike. */
+static int same_bits_two_materials_differ(void)
+{
+    uint64_t h[4];
+    dem_stats st;
+    double wall;
+    bed_case c = {.n = 400, .steps = 1500, .stirred = true, .two_mat = 3};
+    ENSURE(run_bed(1, c, &h[0], &st, &wall) == 0);
+    ENSURE(run_bed(2, c, &h[1], &st, &wall) == 0);
+    c.portable = true;
+    ENSURE(run_bed(1, c, &h[2], &st, &wall) == 0);
+    c.two_mat = 2, c.portable = false;
+    ENSURE(run_bed(1, c, &h[3], &st, &wall) == 0);
+    printf("hash two materials %016llx (2 threads %016llx, portable %016llx), alike %016llx; %d grain-grain "
+           "contacts\n",
+           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], (unsigned long long)h[3],
+           st.contacts_gg);
+    ENSURE(st.contacts_gg > 50);
+    ENSURE(h[0] == h[1]);
+    ENSURE(h[0] == h[2]);
+    ENSURE(h[0] != h[3]);
+    return 0;
+}
+
 /* The neighbour list against brute force: a cloud of grains of three sizes
  * (cells of several grains, grains on cell and grid edges), searched with
  * the grains sorted by cell (the column ranges of dem_grid.c) and unsorted
@@ -274,6 +306,7 @@ static int neighbour_list_brute_force(void)
 
 static const test_case tests[] = {{"neighbour_list_brute_force", neighbour_list_brute_force},
                                   {"same_bits_two_materials", same_bits_two_materials},
+                                  {"same_bits_two_materials_differ", same_bits_two_materials_differ},
                                   {"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
                                   {"same_bits_stirred", same_bits_stirred},
                                   {"same_bits_with_surface", same_bits_with_surface},

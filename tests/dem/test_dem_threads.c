@@ -48,7 +48,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     cm_error err = {0};
     ENSURE_MSG(dem_world_create(&d, 1, &m, &w, &err) == 0, "%s", err.msg);
     ENSURE(test_two_layer_box(w, 0.04, 0.04, n) == 0);
-    if (c.two_mat) { /* the same grains and walls in a world of two materials alike */
+    if (c.two_mat) { /* the same grains and walls in a world of two materials (alike unless two_mat is 3) */
         dem_material m2 = m;
         if (c.two_mat == 3) /* softer, rougher, rolling less */
             m2.young *= 0.5, m2.friction = 0.6, m2.rolling_friction = 0.02;

@@ -70,6 +70,14 @@ static inline int row_held(const double *xi, const int hs)
     return u != 0;
 }
 
+/* Pair p has come apart: its spring row of hs values and its held flag
+ * cleared (rare; the candidates' tests call it). */
+static inline void spring_clear(const pair_arrays *a, int p, int hs)
+{
+    memset(a->hist + (size_t)hs * p, 0, (size_t)hs * sizeof(double));
+    a->held[p] = 0;
+}
+
 /* Grain–grain contact of pair p (slots i, j): the force on i and the torques
  * on i and j into out[DEM_PAIR_F]. Returns 1 in contact; out is not written
  * otherwise. */
@@ -545,10 +553,8 @@ __attribute__((target("avx2"))) static int fill_avx2(const pair_arrays *a, pair_
         const int m_held = (int)((h & 1u) | (h >> 7 & 2u) | (h >> 14 & 4u) | (h >> 21 & 8u));
         if (m_apart & m_held) /* a spring to clear (rare) */
             for (int k = 0; k < 4; k++)
-                if (m_apart & m_held & 1 << k) {
-                    memset(a->hist + (size_t)hs * (p + k), 0, (size_t)hs * sizeof(double));
-                    held[p + k] = 0;
-                }
+                if (m_apart & m_held & 1 << k)
+                    spring_clear(a, p + k, hs);
         const __m256i q64 = _mm256_loadu_si256((const __m256i *)pack64[m]);
         const __m256i q32 = _mm256_loadu_si256((const __m256i *)pack32[m]);
         const __m128i vc = one_mat ? c_one
@@ -594,7 +600,6 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
 #endif
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
-    double *restrict hist = a->hist;
     unsigned char *restrict held = a->held;
     const int one_c = a->one_c;
     int n = b->n;
@@ -603,13 +608,8 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
         const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
         const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];
         const int apart = (d2 >= rs * rs) | (d2 == 0.0);
-        if (apart & held[p]) {
-            double *xi = hist + (size_t)hs * p;
-            xi[0] = xi[1] = xi[2] = 0.0;
-            if (spring)
-                xi[3] = xi[4] = xi[5] = 0.0;
-            held[p] = 0;
-        }
+        if (apart & held[p])
+            spring_clear(a, p, hs);
         b->p[n] = p, b->i[n] = i, b->j[n] = j, b->c[n] = one_mat ? one_c : mat[i] * DEM_MAX_MATERIALS + mat[j];
         b->ex[n] = ex, b->ey[n] = ey, b->ez[n] = ez, b->d2[n] = d2;
         n += !apart;
@@ -655,10 +655,8 @@ static inline __attribute__((always_inline)) void cross_part(const pair_arrays *
             const int apart = (d2 >= rs * rs) | (d2 == 0.0);
             pl->con[c] = (unsigned char)!apart;
             if (apart) {
-                if (a.held[p]) {
-                    memset(a.hist + (size_t)hs * p, 0, (size_t)hs * sizeof(double));
-                    a.held[p] = 0;
-                }
+                if (a.held[p])
+                    spring_clear(&a, p, hs);
                 continue;
             }
             const int n = b.n++;

@@ -421,7 +421,7 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
 
 /* The clocks at the end of a stage, which is where the next one starts:
  * each clock is read once per stage boundary, not twice (the CPU clock is a
- * system call, ~1.5 us on a virtual machine: 22 of them were ~6 % of the
+ * system call, ~1.5 us on a virtual machine: 22 of them were ~7 % of the
  * paper scene's FEM time). What runs between two stages goes to the next. */
 typedef struct stage_clock {
     double wall, cpu;

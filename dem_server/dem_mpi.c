@@ -170,10 +170,15 @@ int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_erro
     long run = 0;
     int c = 0;
     for (int r = 1; r < ranks; r++) {
-        /* first column whose preceding count reaches r/ranks of the total */
+        /* the column boundary whose preceding count is nearest r/ranks of
+         * the total: the first one reaching it or the one before (always the
+         * first would hand the ranks below up to a column too much: on the
+         * paper's scene, rank 0, which also shares its core with fem_server) */
         long target = (long)((double)total * r / ranks + 0.5);
         while (c < n_cols && run < target)
             run += count[c++];
+        if (c > 0 && target - (run - count[c - 1]) < run - target)
+            run -= count[--c];
         int b = c;
         if (b < bounds[r - 1] + 1)
             b = bounds[r - 1] + 1; /* at least one column each */
@@ -182,6 +187,8 @@ int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_erro
         bounds[r] = b;
         while (c < b)
             run += count[c++];
+        while (c > b)
+            run -= count[--c];
     }
     bounds[ranks] = n_cols;
     return CM_OK;

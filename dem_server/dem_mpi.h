@@ -110,7 +110,7 @@ int dem_mpi_bcast(MPI_Comm comm, void *buf, size_t bytes, cm_error *err);
 /* Slab bounds: ranks r gets columns [bounds[r], bounds[r + 1]) of n_cols,
  * each at least one column, split so that the grain counts (or weights)
  * count[c] are as even as whole columns allow (rank r's slab starts at the
- * first column where the running count reaches r/ranks of the total).
+ * column boundary where the running count is nearest r/ranks of the total).
  * CM_ERR_RANGE when there are fewer columns than ranks. */
 int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_error *err);
 

@@ -419,13 +419,29 @@ static int stage_record(fem_coupled *c, const exchange *x, cm_error *err)
 
 /* ---- the pipeline ---------------------------------------------------------------------------------------- */
 
+/* The clocks at the end of a stage, which is where the next one starts:
+ * each clock is read once per stage boundary, not twice (the CPU clock is a
+ * system call, ~1.5 us on a virtual machine: 22 of them were ~7 % of the
+ * paper scene's FEM time). What runs between two stages goes to the next. */
+typedef struct stage_clock {
+    double wall, cpu;
+} stage_clock;
+
+static stage_clock clock_now(void) { return (stage_clock){cm_now(), cm_cpu_now()}; }
+
+static void lap(fem_profile *p, int id, stage_clock *mark)
+{
+    const stage_clock now = clock_now();
+    p->seconds[id] += now.wall - mark->wall;
+    p->cpu_seconds[id] += now.cpu - mark->cpu;
+    *mark = now;
+}
+
 /* Times one stage into the profile (wall and CPU time); its status goes to st. */
 #define STAGE(id, call)                                                                                        \
     do {                                                                                                       \
-        double t0_ = cm_now(), c0_ = cm_cpu_now();                                                             \
         st = (call);                                                                                           \
-        c->prof.seconds[id] += cm_now() - t0_;                                                                 \
-        c->prof.cpu_seconds[id] += cm_cpu_now() - c0_;                                                         \
+        lap(&c->prof, id, &mark);                                                                              \
     } while (0)
 /* The same, and the exchange ends there unless the stage let it go on. */
 #define STAGE_OR_RETURN(id, call)                                                                              \
@@ -443,6 +459,7 @@ fem_exchange_status fem_exchange(fem_coupled *c, cm_error *err)
     exchange x;
     memset(&x, 0, sizeof x);
     fem_exchange_status st;
+    stage_clock mark = clock_now();
     STAGE_OR_RETURN(FEM_STAGE_RECEIVE, stage_receive(c, &x));
     STAGE(FEM_STAGE_CHECK_FRAME, failed(stage_check_frame(c, &x, err)));
     if (st == FEM_EXCHANGE_NEXT)

@@ -299,7 +299,8 @@ static int same_bits_time(void)
 }
 
 /* The split of cell columns into slabs: even grain counts where whole
- * columns allow, at least one column per rank, too few columns refused. */
+ * columns allow (the boundary nearest the even share, on either side of
+ * it), at least one column per rank, too few columns refused. */
 static int slab_bounds(void)
 {
     cm_error err = {0};
@@ -312,7 +313,22 @@ static int slab_bounds(void)
     ENSURE(b[0] == 0 && b[3] == 6);
     for (int r = 0; r < 3; r++)
         ENSURE(b[r + 1] > b[r]);
-    ENSURE(b[1] == 3 && b[2] == 4); /* the slab of the dense column ends with it; the next gets one column */
+    long most = 0; /* the dense column alone is the heaviest slab: 100 */
+    for (int r = 0; r < 3; r++) {
+        long load = 0;
+        for (int c = b[r]; c < b[r + 1]; c++)
+            load += heavy[c];
+        most = load > most ? load : most;
+    }
+    ENSURE(most == 100);
+    /* 40 | 30 30 (40 against 60) is nearer an even split than 40 30 | 30
+     * (70 against 30): the boundary before the column that reaches half */
+    const long front[3] = {40, 30, 30};
+    ENSURE(dem_mpi_slabs(front, 3, 2, b, &err) == 0);
+    ENSURE(b[0] == 0 && b[1] == 1 && b[2] == 3);
+    const long back[3] = {30, 30, 40}; /* 30 30 | 40 (60 against 40) before 30 | 30 40 (30 against 70) */
+    ENSURE(dem_mpi_slabs(back, 3, 2, b, &err) == 0);
+    ENSURE(b[1] == 2);
     const long empty[3] = {0, 0, 0};
     ENSURE(dem_mpi_slabs(empty, 3, 3, b, &err) == 0);
     ENSURE(b[1] == 1 && b[2] == 2);

@@ -44,6 +44,21 @@ def read_traction(path):
     return {h: data[:, k] for k, h in enumerate(header)}
 
 
+def set_down(traction):
+    """(time s, sinkage m) of the wheel when its travel began: the sinkage
+    under the load before it rolls (the static sinkage of a load-controlled
+    set-down, wheel.motion = "load_travel"; the depth at which the load was
+    reached under position control), from traction.csv's phase column
+    (fem_server's drive phases: 0 sinking, 1 travelling). None when the run
+    never travelled."""
+    phase = np.rint(traction["phase"])
+    idx = np.flatnonzero(phase == 1)
+    if idx.size == 0:
+        return None
+    i = int(idx[0])
+    return float(traction["t"][i]), float(traction["sinkage"][i])
+
+
 def _h5():
     import h5py
     return h5py

@@ -169,8 +169,33 @@ def choose_needs_interval():
     ensure(p.returncode == 0 and p.stdout.split() == ["coupling.exchange_every=2"], (p.returncode, p.stdout, p.stderr))
 
 
+def static_sinkage_at_travel_start():
+    # The study's static sinkage is the sinkage of traction.csv's first row
+    # of the travel phase (1), not of the last row nor of the sinking (0) or
+    # finished (2) phases; a run that never travelled has none.
+    with tempfile.TemporaryDirectory() as d:
+        static_sinkage_in(d)
+
+
+def static_sinkage_in(d):
+    rows = [(0.1, 0, 0.010), (0.2, 0, 0.020), (0.3, 0, 0.029), (0.4, 1, 0.031), (0.5, 1, 0.045), (0.6, 2, 0.050)]
+    with open(os.path.join(d, "traction.csv"), "w") as f:
+        f.write("t,phase,sinkage,T_P\n")
+        f.writelines("%g,%d,%g,0\n" % r for r in rows)
+    quantities = {k: {"mean": 1.0, "half_width": 0.1, "sd": 0.1} for k in S.FROM_SUMMARY.values()}
+    with open(os.path.join(d, "summary.json"), "w") as f:
+        f.write('{"travelled": true, "quantities": %s}' % str(quantities).replace("'", '"'))
+    q, _ = S.tire_quantities(d)  # the study's reading of a run folder
+    ensure(q["static_sinkage"] == (0.031, 0.0), q)
+    ensure("static_sinkage" in S.QUANTITIES["tire"] and "static_sinkage" in S.columns_for("tire"),
+           S.columns_for("tire"))
+    with open(os.path.join(d, "traction.csv"), "w") as f:
+        f.write("t,phase,sinkage,T_P\n0.1,0,0.01,0\n0.2,0,0.02,0\n")
+    ensure(S.runio.set_down(S.runio.read_traction(os.path.join(d, "traction.csv"))) is None, "no travel")
+
+
 CASES = {f.__name__: f for f in (paired_error_known, cost_without_settling, one_bed_unstable, plan_shares_beds,
-                                 choose_needs_interval)}
+                                 choose_needs_interval, static_sinkage_at_travel_start)}
 
 if __name__ == "__main__":
     CASES[sys.argv[1]]()

@@ -90,7 +90,7 @@ def travel_summary(outdir, d):
     s = runio.read_summary(outdir)
     if s is None or not s.get("travelled"):
         return None
-    idx = np.flatnonzero(np.round(d["phase"]).astype(int) == 1)
+    idx = runio.travel_rows(d)
     return s["steady"]["start_time"], s["steady"]["end_time"], idx, s["stats"]
 
 

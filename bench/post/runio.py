@@ -44,15 +44,19 @@ def read_traction(path):
     return {h: data[:, k] for k, h in enumerate(header)}
 
 
+def travel_rows(traction):
+    """The row indices of traction.csv's travel phase, in order (the phase
+    column holds fem_server's drive phases: 0 sinking, 1 travelling, 2
+    done)."""
+    return np.flatnonzero(np.rint(traction["phase"]) == 1)
+
+
 def set_down(traction):
     """(time s, sinkage m) of the wheel when its travel began: the sinkage
     under the load before it rolls (the static sinkage of a load-controlled
     set-down, wheel.motion = "load_travel"; the depth at which the load was
-    reached under position control), from traction.csv's phase column
-    (fem_server's drive phases: 0 sinking, 1 travelling). None when the run
-    never travelled."""
-    phase = np.rint(traction["phase"])
-    idx = np.flatnonzero(phase == 1)
+    reached under position control). None when the run never travelled."""
+    idx = travel_rows(traction)
     if idx.size == 0:
         return None
     i = int(idx[0])

@@ -12,6 +12,7 @@ usage: test_study_beds.py CASE [BUILD_DIR]   (ctest runs one case per entry)"""
 import csv
 import importlib.machinery
 import importlib.util
+import json
 import math
 import os
 import subprocess
@@ -184,7 +185,7 @@ def static_sinkage_in(d):
         f.writelines("%g,%d,%g,0\n" % r for r in rows)
     quantities = {k: {"mean": 1.0, "half_width": 0.1, "sd": 0.1} for k in S.FROM_SUMMARY.values()}
     with open(os.path.join(d, "summary.json"), "w") as f:
-        f.write('{"travelled": true, "quantities": %s}' % str(quantities).replace("'", '"'))
+        json.dump({"travelled": True, "quantities": quantities}, f)
     q, _ = S.tire_quantities(d)  # the study's reading of a run folder
     ensure(q["static_sinkage"] == (0.031, 0.0), q)
     ensure("static_sinkage" in S.QUANTITIES["tire"] and "static_sinkage" in S.columns_for("tire"),

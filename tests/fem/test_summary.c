@@ -126,18 +126,26 @@ static double syn_set_down[2];
 /* dir/wheel.h5 with SYN_SINK rows of sinking and SYN_N of travel: the load
  * and T_P AR(1) noise about their true values, the sinkage S in a transient
  * 0.015 m e^{-t/0.1} plus `sink_rate` t (m/s) over the travel. */
-static int write_synthetic(const char *dir, double sink_rate)
+/* dir/wheel.h5, new, with an empty /series of the columns the summary reads. */
+static int create_series(const char *dir, cm_h5 **h5, cm_h5_series **ser)
 {
     char path[256];
     snprintf(path, sizeof path, "%s/wheel.h5", dir);
     static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My",
                                        "Fx"};
     cm_error err = {0};
+    cm_h5_def def = cm_h5_default_def();
+    ENSURE_MSG(cm_h5_create(path, &def, h5, &err) == 0, "%s", err.msg);
+    ENSURE_MSG(cm_h5_series_create(*h5, "/series", cols, 12, NULL, ser, &err) == 0, "%s", err.msg);
+    return 0;
+}
+
+static int write_synthetic(const char *dir, double sink_rate)
+{
+    cm_error err = {0};
     cm_h5 *h5 = NULL;
     cm_h5_series *ser = NULL;
-    cm_h5_def def = cm_h5_default_def();
-    ENSURE_MSG(cm_h5_create(path, &def, &h5, &err) == 0, "%s", err.msg);
-    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 12, NULL, &ser, &err) == 0, "%s", err.msg);
+    ENSURE(create_series(dir, &h5, &ser) == 0);
     uint64_t s = 99;
     double e1 = 0, e2 = 0, e3 = 0;
     for (int i = 0; i < SYN_SINK + SYN_N; i++) {
@@ -392,14 +400,10 @@ static int summary_never_travelled(void)
     ENSURE(mkdtemp(dir));
     char path[256];
     snprintf(path, sizeof path, "%s/wheel.h5", dir);
-    static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My",
-                                       "Fx"};
     cm_error err = {0};
     cm_h5 *h5 = NULL;
     cm_h5_series *ser = NULL;
-    cm_h5_def def = cm_h5_default_def();
-    ENSURE_MSG(cm_h5_create(path, &def, &h5, &err) == 0, "%s", err.msg);
-    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 12, NULL, &ser, &err) == 0, "%s", err.msg);
+    ENSURE(create_series(dir, &h5, &ser) == 0);
     for (int i = 0; i < 100; i++) {
         double row[12] = {i * syn_dt, DRIVE_SINK, 0, 0, 2.0 * i, 0, 0, 0, 1e-4 * i, 0, 0, 0};
         ENSURE_MSG(cm_h5_series_append(ser, row, &err) == 0, "%s", err.msg);

@@ -40,6 +40,7 @@ typedef struct dist_ctx {
     double cost;               /* busy s per owned grain-step here, smoothed; 0 before the first measure */
     double *costs;             /* size: every rank's cost */
     double wall_mark, wait_mark; /* at the previous rebuild: the clock, the waits' CPU time (dem_profile.wait_cpu) */
+    double added;              /* busy s added since the previous rebuild (dem_mpi_add_busy) */
     long steps_mark, own_mark; /* steps then, grains owned since */
     int *dest;                 /* per slot: rank of the grain's new slab (owned grains) */
     int *scount, *sdispl, *rcount, *rdispl; /* size each, alltoallv */
@@ -217,11 +218,12 @@ static int grain_weight(dem_world *w, dist_ctx *d, long *weight, cm_error *err)
     const double now = cm_now(), waits = w->prof.wait_cpu;
     const long steps = w->prof.steps - d->steps_mark;
     if (d->distributed && steps > 0 && d->own_mark > 0) {
-        const double c = ((now - d->wall_mark) - (waits - d->wait_mark)) / ((double)steps * (double)d->own_mark);
+        const double c =
+            ((now - d->wall_mark) - (waits - d->wait_mark) + d->added) / ((double)steps * (double)d->own_mark);
         if (isfinite(c) && c > 0.0)
             d->cost = d->cost > 0.0 ? 0.75 * d->cost + 0.25 * c : c;
     }
-    d->wall_mark = now, d->wait_mark = waits, d->steps_mark = w->prof.steps;
+    d->wall_mark = now, d->wait_mark = waits, d->steps_mark = w->prof.steps, d->added = 0.0;
     int rc = MPI_Allgather(&d->cost, 1, MPI_DOUBLE, d->costs, 1, MPI_DOUBLE, d->comm);
     if (rc != MPI_SUCCESS)
         return mpi_fail(err, rc, "allgather of the ranks' costs", w->step);
@@ -758,6 +760,14 @@ int dem_mpi_set_balance(dem_world *w, int balance)
     if (!w->dist || (balance != DEM_MPI_BALANCE_GRAINS && balance != DEM_MPI_BALANCE_TIME))
         return CM_ERR_STATE;
     d->balance = balance;
+    return CM_OK;
+}
+
+int dem_mpi_add_busy(dem_world *w, double seconds)
+{
+    if (!w->dist || !(seconds >= 0.0) || !isfinite(seconds))
+        return CM_ERR_STATE;
+    ((dist_ctx *)w->dist_ctx)->added += seconds;
     return CM_OK;
 }
 

@@ -48,6 +48,13 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err);
  * CM_ERR_STATE for a world not attached or an unknown mode. */
 enum { DEM_MPI_BALANCE_GRAINS = 0, DEM_MPI_BALANCE_TIME = 1 };
 int dem_mpi_set_balance(dem_world *w, int balance);
+/* Counts `seconds` (>= 0) more busy time on this rank for the time balance,
+ * as if its core had spent them on its grains since the previous rebuild: a
+ * slower core without the delay (test_dem_mpi.same_bits_time). A real delay
+ * makes the other ranks wait for this one, and on a machine that other
+ * programs load their waits lose their cores and measure as busy too.
+ * CM_ERR_STATE for a world not attached or a negative or non-finite time. */
+int dem_mpi_add_busy(dem_world *w, double seconds);
 
 /* Frees the distribution (the world keeps this rank's grains and is no
  * longer stepped in step with the others); dem_world_destroy does it too. */

@@ -114,6 +114,10 @@ typedef struct summary_result {
     int travelled;            /* the run reached the travel phase */
     size_t n_travel, start, end;
     double t_start, t_end, travel_m, lug_periods;
+    /* the set-down: the time and sinkage of the travel's first row, where
+     * the wheel began to roll under its load (the static sinkage of a
+     * load-controlled set-down); NaN when it never travelled */
+    double t_set_down, sinkage_set_down;
     steady_stats q[NQ];
     double profile[PROFILE_BINS][6]; /* phase, T_H, T_R, T_P, load, sinkage */
     /* convergence with travel: the first quarter, half, three quarters and
@@ -132,6 +136,7 @@ static const char *const k_motion[] = {"sink_travel", "hold", "load_travel"};
 static void compute(const fem_summary_def *d, double *const *col, size_t n, summary_result *r)
 {
     memset(r, 0, sizeof *r);
+    r->t_set_down = r->sinkage_set_down = NAN;
     /* the travel phase: the rows of phase DRIVE_TRAVEL, in order */
     size_t m = 0;
     for (size_t i = 0; i < n; i++)
@@ -156,6 +161,8 @@ static void compute(const fem_summary_def *d, double *const *col, size_t n, summ
                 tr[k][j] = col[k][i];
             j++;
         }
+    r->t_set_down = tr[C_T][0];
+    r->sinkage_set_down = tr[C_SINK][0];
     /* the steady part: every reported quantity past its transient */
     static const int steady_cols[] = {C_TH, C_TR, C_TP, C_FZ, C_SINK};
     size_t start = 0;
@@ -303,6 +310,8 @@ static void log_result(const fem_summary_def *d, const summary_result *r)
     cm_log_info("traction over the steady part of the travel (every quantity past its transient, %.0f whole lug "
                 "periods): exchanges %zu to %zu of %zu (t = %.3f to %.3f s, %.3f m), %s",
                 r->lug_periods, r->start, r->end, r->n_travel, r->t_start, r->t_end, r->travel_m, what);
+    cm_log_info("  set down: sinkage %.1f mm when the travel began (t = %.3f s)", 1e3 * r->sinkage_set_down,
+                r->t_set_down);
     for (int q = 0; q < NQ; q++) {
         const steady_stats *s = &r->q[q];
         double scale = q == Q_SINK ? 1e3 : q == Q_SLIP ? 100 : 1;
@@ -359,7 +368,9 @@ static int write_h5(const char *path, const fem_summary_def *d, const summary_re
                attr_double(g, "travel_completed", d->travel_done) || attr_double(g, "travelled_m", d->travelled) ||
                attr_string(g, "travel_warning", r->short_travel) || attr_string(g, "work_warning", r->work) ||
                attr_double(g, "interface_work_dem", d->work_dem) || attr_double(g, "interface_work_fem", d->work_fem) ||
-               attr_double(g, "interface_work_gap_max", d->work_gap_max);
+               attr_double(g, "interface_work_gap_max", d->work_gap_max) ||
+               attr_double(g, "set_down_time", r->t_set_down) ||
+               attr_double(g, "set_down_sinkage", r->sinkage_set_down);
         if (r->travelled)
             bad |= write_matrix(g, "quantities", &rows[0][0], NQ, NSTAT) ||
                    write_matrix(g, "convergence", &r->conv[0][0], 4, 11) ||
@@ -410,6 +421,8 @@ static int write_json(const char *path, const fem_summary_def *d, const summary_
     json_field(f, ", \"fem_J\": ", d->work_fem);
     json_field(f, ", \"gap_max\": ", d->work_gap_max);
     json_field(f, ", \"warned_at_s\": ", d->work_warned_at);
+    json_field(f, "},\n  \"set_down\": {\"time_s\": ", r->t_set_down);
+    json_field(f, ", \"sinkage_m\": ", r->sinkage_set_down);
     fputs("}", f);
     fputs(",\n  \"steady\": {\"start_time\": ", f);
     cm_json_number(f, r->t_start);

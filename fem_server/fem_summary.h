@@ -21,6 +21,9 @@
  *                                  (the half-width shrinks as 1/sqrt(travel)
  *                                  once batches are long enough: choose the
  *                                  travel a target needs from it)
+ *   wheel.h5:/summary attributes   also the set-down: set_down_time and
+ *                                  set_down_sinkage, the travel's first row
+ *                                  (the static sinkage under the load)
  *   summary.json                   the same, for scripts (bench/post)
  * Quantities: T_H, T_R, T_P (N), load W = Fz (N), sinkage (m), slip, and per
  * actual load the coefficients T_H/W, T_R/W, T_P/W (ratio of the means,

@@ -51,7 +51,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
 
-REPORTED = ("T_H", "T_R", "T_P", "load", "sinkage", "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R")
+REPORTED = ("T_H", "T_R", "T_P", "load", "sinkage", "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R",
+            "static_sinkage")
 
 
 def t95(dof):
@@ -202,8 +203,19 @@ def load_summaries(dirs):
         if not os.path.exists(p):
             raise SystemExit("ensemble: %s has no summary.json (the run failed or is still running)" % d)
         with open(p) as f:
-            out.append(json.load(f))
+            out.append(with_static_sinkage(json.load(f)))
     return out
+
+
+def with_static_sinkage(s):
+    """The summary with its set-down sinkage (summary.json's set_down, the
+    sinkage when the travel began) as the quantity "static_sinkage": one
+    value per run, no interval of its own (its interval is the beds')."""
+    sd = s.get("set_down") or {}
+    if s.get("travelled") and sd.get("sinkage_m") is not None:
+        s.setdefault("quantities", {})["static_sinkage"] = {"mean": float(sd["sinkage_m"]), "half_width": 0.0,
+                                                           "unit": "m"}
+    return s
 
 
 def report(res, out=sys.stdout):

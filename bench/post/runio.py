@@ -51,11 +51,22 @@ def travel_rows(traction):
     return np.flatnonzero(np.rint(traction["phase"]) == 1)
 
 
-def set_down(traction):
+def set_down(summary, traction=None):
     """(time s, sinkage m) of the wheel when its travel began: the sinkage
     under the load before it rolls (the static sinkage of a load-controlled
     set-down, wheel.motion = "load_travel"; the depth at which the load was
-    reached under position control). None when the run never travelled."""
+    reached under position control), as fem_server's summary.json reports
+    it (`set_down`). A summary.json from before fem_server reported it has
+    no such key: then the first travel row of the run's traction.csv, the
+    row fem_server takes (`traction`, from read_traction). None when the
+    run never travelled (or neither says)."""
+    sd = summary.get("set_down") if summary else None
+    if sd is not None:
+        if sd.get("time_s") is None or sd.get("sinkage_m") is None:
+            return None
+        return float(sd["time_s"]), float(sd["sinkage_m"])
+    if traction is None:
+        return None
     idx = travel_rows(traction)
     if idx.size == 0:
         return None

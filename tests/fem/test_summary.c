@@ -120,22 +120,32 @@ static int lug_window_and_profile(void)
  * coefficient is per actual load, the load warning names position control. */
 enum { SYN_SINK = 500, SYN_N = 20000 };
 static const double syn_dt = 1e-4, syn_v = 0.5, syn_R = 0.3, syn_W = 150.0, syn_TP = -12.0, syn_S = 0.04;
+/* the time and sinkage of the travel's first row, as write_synthetic wrote them */
+static double syn_set_down[2];
 
 /* dir/wheel.h5 with SYN_SINK rows of sinking and SYN_N of travel: the load
  * and T_P AR(1) noise about their true values, the sinkage S in a transient
  * 0.015 m e^{-t/0.1} plus `sink_rate` t (m/s) over the travel. */
-static int write_synthetic(const char *dir, double sink_rate)
+/* dir/wheel.h5, new, with an empty /series of the columns the summary reads. */
+static int create_series(const char *dir, cm_h5 **h5, cm_h5_series **ser)
 {
     char path[256];
     snprintf(path, sizeof path, "%s/wheel.h5", dir);
     static const char *const cols[] = {"t", "phase", "x", "angle", "Fz", "T_H", "T_R", "T_P", "sinkage", "slip", "My",
                                        "Fx"};
     cm_error err = {0};
+    cm_h5_def def = cm_h5_default_def();
+    ENSURE_MSG(cm_h5_create(path, &def, h5, &err) == 0, "%s", err.msg);
+    ENSURE_MSG(cm_h5_series_create(*h5, "/series", cols, 12, NULL, ser, &err) == 0, "%s", err.msg);
+    return 0;
+}
+
+static int write_synthetic(const char *dir, double sink_rate)
+{
+    cm_error err = {0};
     cm_h5 *h5 = NULL;
     cm_h5_series *ser = NULL;
-    cm_h5_def def = cm_h5_default_def();
-    ENSURE_MSG(cm_h5_create(path, &def, &h5, &err) == 0, "%s", err.msg);
-    ENSURE_MSG(cm_h5_series_create(h5, "/series", cols, 12, NULL, &ser, &err) == 0, "%s", err.msg);
+    ENSURE(create_series(dir, &h5, &ser) == 0);
     uint64_t s = 99;
     double e1 = 0, e2 = 0, e3 = 0;
     for (int i = 0; i < SYN_SINK + SYN_N; i++) {
@@ -146,6 +156,8 @@ static int write_synthetic(const char *dir, double sink_rate)
         double load = syn_W + 5.0 * e1, tp = syn_TP + 2.0 * e2;
         double row[12] = {i * syn_dt, travel ? DRIVE_TRAVEL : DRIVE_SINK, syn_v * tt, -syn_v * tt / (syn_R * 0.9),
                           load, 30 + tp / 2, -30 + tp / 2, tp, sink, 0.1, -syn_R * (30 + tp / 2), tp};
+        if (i == SYN_SINK)
+            syn_set_down[0] = row[0], syn_set_down[1] = sink;
         ENSURE_MSG(cm_h5_series_append(ser, row, &err) == 0, "%s", err.msg);
     }
     ENSURE(cm_h5_close(&h5, &err) == 0);
@@ -216,6 +228,13 @@ static int summary_of_synthetic_run(void)
     hid_t at = H5Aopen(g, "steady_start_time", H5P_DEFAULT);
     ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &t_start) >= 0);
     H5Aclose(at);
+    double set_down[2] = {0, 0};
+    at = H5Aopen(g, "set_down_time", H5P_DEFAULT);
+    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &set_down[0]) >= 0);
+    H5Aclose(at);
+    at = H5Aopen(g, "set_down_sinkage", H5P_DEFAULT);
+    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &set_down[1]) >= 0);
+    H5Aclose(at);
     H5Gclose(g);
     H5Fclose(f);
     char warn[600], drift[400];
@@ -249,6 +268,14 @@ static int summary_of_synthetic_run(void)
     char buf[16384];
     ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
     ENSURE(strstr(buf, "\"T_P_per_W\"") && strstr(buf, "\"warnings\": [\"the steady load is 150"));
+    /* the set-down is the travel's first row: not the last row of the
+     * sinking (5 mm shallower here) nor the steady sinkage (15 mm deeper) */
+    ENSURE(set_down[0] == syn_set_down[0] && set_down[1] == syn_set_down[1]);
+    const char *sd = strstr(buf, "\"set_down\": {\"time_s\": ");
+    double sd_json[2] = {0, 0};
+    ENSURE_MSG(sd && sscanf(sd, "\"set_down\": {\"time_s\": %lf, \"sinkage_m\": %lf}", &sd_json[0], &sd_json[1]) == 2,
+               "%s", buf);
+    ENSURE(sd_json[0] == syn_set_down[0] && sd_json[1] == syn_set_down[1]);
     /* on target: no warning */
     d.target_load = 150.0;
     ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
@@ -365,6 +392,44 @@ static int summary_work_warning(void)
     return 0;
 }
 
+/* A wheel that never reached the travel phase (still sinking when the run
+ * stopped) has no set-down: null in summary.json, NaN in wheel.h5. */
+static int summary_never_travelled(void)
+{
+    char dir[] = "/tmp/fem_summary_sink_XXXXXX";
+    ENSURE(mkdtemp(dir));
+    char path[256];
+    snprintf(path, sizeof path, "%s/wheel.h5", dir);
+    cm_error err = {0};
+    cm_h5 *h5 = NULL;
+    cm_h5_series *ser = NULL;
+    ENSURE(create_series(dir, &h5, &ser) == 0);
+    for (int i = 0; i < 100; i++) {
+        double row[12] = {i * syn_dt, DRIVE_SINK, 0, 0, 2.0 * i, 0, 0, 0, 1e-4 * i, 0, 0, 0};
+        ENSURE_MSG(cm_h5_series_append(ser, row, &err) == 0, "%s", err.msg);
+    }
+    ENSURE(cm_h5_close(&h5, &err) == 0);
+    fem_summary_def d = synthetic_def(dir);
+    ENSURE_MSG(fem_summary_write(&d, &err) == CM_OK, "%s", err.msg);
+    char buf[16384];
+    ENSURE(read_summary_json(dir, buf, sizeof buf) == 0);
+    ENSURE_MSG(strstr(buf, "\"travelled\": false") &&
+                   strstr(buf, "\"set_down\": {\"time_s\": null, \"sinkage_m\": null}"),
+               "%s", buf);
+    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
+    ENSURE(f >= 0);
+    hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
+    hid_t at = H5Aopen(g, "set_down_sinkage", H5P_DEFAULT);
+    double v = 0;
+    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &v) >= 0 && isnan(v));
+    H5Aclose(at);
+    H5Gclose(g);
+    H5Fclose(f);
+    snprintf(buf, sizeof buf, "rm -rf %s", dir);
+    ENSURE(system(buf) == 0);
+    return 0;
+}
+
 static const test_case tests[] = {
     {"iat_of_ar1", iat_of_ar1},
     {"coverage_correlated", coverage_correlated},
@@ -373,6 +438,7 @@ static const test_case tests[] = {
     {"summary_sinkage_drift", summary_sinkage_drift},
     {"summary_short_travel", summary_short_travel},
     {"summary_work_warning", summary_work_warning},
+    {"summary_never_travelled", summary_never_travelled},
 };
 
 int main(int argc, char **argv)

@@ -79,8 +79,8 @@ def reads_summaries_from_runs():
     for k, m in enumerate((1.0, 2.0, 3.0)):
         d = os.path.join(tmp, "seed%d" % (k + 1))
         os.makedirs(d)
-        with open(os.path.join(d, "summary.json"), "w") as f:
-            json.dump(summary(m, 0.1), f)
+        with open(os.path.join(d, "summary.json"), "w") as f:  # with the set-down, as fem_server writes it
+            json.dump(dict(summary(m, 0.1), set_down={"time_s": 0.6, "sinkage_m": 0.028 + 0.002 * m}), f)
         dirs.append(d)
     out = os.path.join(tmp, "ens.json")
     p = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "post", "ensemble.py")] + dirs +
@@ -88,6 +88,10 @@ def reads_summaries_from_runs():
     ensure(p.returncode == 0, p.stderr)
     r = json.load(open(out))["quantities"]["T_P_per_W"]
     ensure(abs(r["mean"] - 2.0) < 1e-12 and abs(r["half_width"] - 4.303 * 1.0 / math.sqrt(3)) < 1e-9, r)
+    # the static sinkage (summary.json's set_down): one value per run, its interval the beds'
+    r = json.load(open(out))["quantities"]["static_sinkage"]
+    ensure(abs(r["mean"] - 0.032) < 1e-12 and abs(r["half_width"] - 4.303 * 0.002 / math.sqrt(3)) < 1e-9
+           and r["unit"] == "m" and r["within_run_se"] == 0.0, r)
     ensure("seeds" in p.stdout and "dominates" in p.stdout, p.stdout)
     # a run without its summary is named
     os.remove(os.path.join(dirs[1], "summary.json"))

@@ -171,9 +171,11 @@ def choose_needs_interval():
 
 
 def static_sinkage_at_travel_start():
-    # The study's static sinkage is the sinkage of traction.csv's first row
-    # of the travel phase (1), not of the last row nor of the sinking (0) or
-    # finished (2) phases; a run that never travelled has none.
+    # The study's static sinkage is summary.json's set_down (fem_server's),
+    # not traction.csv's; for a summary.json written before fem_server
+    # reported it, traction.csv's first row of the travel phase (1), not its
+    # last row nor a row of the sinking (0) or finished (2) phases; a run that
+    # never travelled has none.
     with tempfile.TemporaryDirectory() as d:
         static_sinkage_in(d)
 
@@ -184,15 +186,24 @@ def static_sinkage_in(d):
         f.write("t,phase,sinkage,T_P\n")
         f.writelines("%g,%d,%g,0\n" % r for r in rows)
     quantities = {k: {"mean": 1.0, "half_width": 0.1, "sd": 0.1} for k in S.FROM_SUMMARY.values()}
-    with open(os.path.join(d, "summary.json"), "w") as f:
-        json.dump({"travelled": True, "quantities": quantities}, f)
+
+    def summary(**extra):
+        with open(os.path.join(d, "summary.json"), "w") as f:
+            json.dump(dict({"travelled": True, "quantities": quantities}, **extra), f)
+
+    summary(set_down={"time_s": 0.35, "sinkage_m": 0.033})
     q, _ = S.tire_quantities(d)  # the study's reading of a run folder
-    ensure(q["static_sinkage"] == (0.031, 0.0), q)
+    ensure(q["static_sinkage"] == (0.033, 0.0), q)
     ensure("static_sinkage" in S.QUANTITIES["tire"] and "static_sinkage" in S.columns_for("tire"),
            S.columns_for("tire"))
+    summary()  # an older fem_server's summary: traction.csv's first travel row
+    q, _ = S.tire_quantities(d)
+    ensure(q["static_sinkage"] == (0.031, 0.0), q)
+    summary(set_down={"time_s": None, "sinkage_m": None})  # never travelled, as fem_server writes it
+    ensure(S.runio.set_down(S.runio.read_summary(d)) is None, "null set_down")
     with open(os.path.join(d, "traction.csv"), "w") as f:
         f.write("t,phase,sinkage,T_P\n0.1,0,0.01,0\n0.2,0,0.02,0\n")
-    ensure(S.runio.set_down(S.runio.read_traction(os.path.join(d, "traction.csv"))) is None, "no travel")
+    ensure(S.runio.set_down({}, S.runio.read_traction(os.path.join(d, "traction.csv"))) is None, "no travel")
 
 
 CASES = {f.__name__: f for f in (paired_error_known, cost_without_settling, one_bed_unstable, plan_shares_beds,

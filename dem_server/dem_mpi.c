@@ -765,9 +765,10 @@ int dem_mpi_set_balance(dem_world *w, int balance)
 
 int dem_mpi_add_busy(dem_world *w, double seconds)
 {
+    dist_ctx *d = w->dist_ctx;
     if (!w->dist || !(seconds >= 0.0) || !isfinite(seconds))
         return CM_ERR_STATE;
-    ((dist_ctx *)w->dist_ctx)->added += seconds;
+    d->added += seconds;
     return CM_OK;
 }
 

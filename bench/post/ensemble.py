@@ -51,6 +51,8 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import numpy as np  # noqa: E402
 
+import runio  # noqa: E402
+
 REPORTED = ("T_H", "T_R", "T_P", "load", "sinkage", "T_H_per_W", "T_R_per_W", "T_P_per_W", "sinkage_per_R",
             "static_sinkage")
 
@@ -211,10 +213,9 @@ def with_static_sinkage(s):
     """The summary with its set-down sinkage (summary.json's set_down, the
     sinkage when the travel began) as the quantity "static_sinkage": one
     value per run, no interval of its own (its interval is the beds')."""
-    sd = s.get("set_down") or {}
-    if s.get("travelled") and sd.get("sinkage_m") is not None:
-        s.setdefault("quantities", {})["static_sinkage"] = {"mean": float(sd["sinkage_m"]), "half_width": 0.0,
-                                                           "unit": "m"}
+    sd = runio.set_down(s) if s.get("travelled") else None
+    if sd is not None:
+        s.setdefault("quantities", {})["static_sinkage"] = {"mean": sd[1], "half_width": 0.0, "unit": "m"}
     return s
 
 

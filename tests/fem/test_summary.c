@@ -123,9 +123,6 @@ static const double syn_dt = 1e-4, syn_v = 0.5, syn_R = 0.3, syn_W = 150.0, syn_
 /* the time and sinkage of the travel's first row, as write_synthetic wrote them */
 static double syn_set_down[2];
 
-/* dir/wheel.h5 with SYN_SINK rows of sinking and SYN_N of travel: the load
- * and T_P AR(1) noise about their true values, the sinkage S in a transient
- * 0.015 m e^{-t/0.1} plus `sink_rate` t (m/s) over the travel. */
 /* dir/wheel.h5, new, with an empty /series of the columns the summary reads. */
 static int create_series(const char *dir, cm_h5 **h5, cm_h5_series **ser)
 {
@@ -140,6 +137,9 @@ static int create_series(const char *dir, cm_h5 **h5, cm_h5_series **ser)
     return 0;
 }
 
+/* dir/wheel.h5 with SYN_SINK rows of sinking and SYN_N of travel: the load
+ * and T_P AR(1) noise about their true values, the sinkage S in a transient
+ * 0.015 m e^{-t/0.1} plus `sink_rate` t (m/s) over the travel. */
 static int write_synthetic(const char *dir, double sink_rate)
 {
     cm_error err = {0};
@@ -164,8 +164,9 @@ static int write_synthetic(const char *dir, double sink_rate)
     return 0;
 }
 
-/* The summary's string attribute `name` of dir/wheel.h5 into buf. */
-static int read_summary_attr(const char *dir, const char *name, char *buf, size_t len)
+/* The summary's attribute `name` of dir/wheel.h5 into buf: a string in its
+ * own type (as_double 0; len bytes with its terminator) or a double. */
+static int read_summary_value(const char *dir, const char *name, int as_double, void *buf, size_t len)
 {
     char path[256];
     snprintf(path, sizeof path, "%s/wheel.h5", dir);
@@ -174,14 +175,26 @@ static int read_summary_attr(const char *dir, const char *name, char *buf, size_
     hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
     hid_t at = H5Aopen(g, name, H5P_DEFAULT);
     ENSURE(at >= 0);
-    hid_t ty = H5Aget_type(at);
+    hid_t ty = as_double ? H5Tcopy(H5T_NATIVE_DOUBLE) : H5Aget_type(at);
     memset(buf, 0, len);
-    ENSURE(H5Tget_size(ty) < len && H5Aread(at, ty, buf) >= 0);
+    ENSURE((as_double ? H5Tget_size(ty) == len : H5Tget_size(ty) < len) && H5Aread(at, ty, buf) >= 0);
     H5Tclose(ty);
     H5Aclose(at);
     H5Gclose(g);
     H5Fclose(f);
     return 0;
+}
+
+/* The summary's string attribute `name` of dir/wheel.h5 into buf. */
+static int read_summary_attr(const char *dir, const char *name, char *buf, size_t len)
+{
+    return read_summary_value(dir, name, 0, buf, len);
+}
+
+/* The summary's number attribute `name` of dir/wheel.h5. */
+static int read_summary_number(const char *dir, const char *name, double *v)
+{
+    return read_summary_value(dir, name, 1, v, sizeof *v);
 }
 
 /* dir/summary.json into buf (as text). */
@@ -224,19 +237,11 @@ static int summary_of_synthetic_run(void)
     ds = H5Dopen2(f, "/summary/convergence", H5P_DEFAULT);
     ENSURE(ds >= 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, conv) >= 0);
     H5Dclose(ds);
-    hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
-    hid_t at = H5Aopen(g, "steady_start_time", H5P_DEFAULT);
-    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &t_start) >= 0);
-    H5Aclose(at);
-    double set_down[2] = {0, 0};
-    at = H5Aopen(g, "set_down_time", H5P_DEFAULT);
-    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &set_down[0]) >= 0);
-    H5Aclose(at);
-    at = H5Aopen(g, "set_down_sinkage", H5P_DEFAULT);
-    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &set_down[1]) >= 0);
-    H5Aclose(at);
-    H5Gclose(g);
     H5Fclose(f);
+    double set_down[2] = {0, 0};
+    ENSURE(read_summary_number(dir, "steady_start_time", &t_start) == 0);
+    ENSURE(read_summary_number(dir, "set_down_time", &set_down[0]) == 0);
+    ENSURE(read_summary_number(dir, "set_down_sinkage", &set_down[1]) == 0);
     char warn[600], drift[400];
     ENSURE(read_summary_attr(dir, "load_warning", warn, sizeof warn) == 0);
     ENSURE(read_summary_attr(dir, "drift_warning", drift, sizeof drift) == 0);
@@ -398,8 +403,6 @@ static int summary_never_travelled(void)
 {
     char dir[] = "/tmp/fem_summary_sink_XXXXXX";
     ENSURE(mkdtemp(dir));
-    char path[256];
-    snprintf(path, sizeof path, "%s/wheel.h5", dir);
     cm_error err = {0};
     cm_h5 *h5 = NULL;
     cm_h5_series *ser = NULL;
@@ -416,15 +419,8 @@ static int summary_never_travelled(void)
     ENSURE_MSG(strstr(buf, "\"travelled\": false") &&
                    strstr(buf, "\"set_down\": {\"time_s\": null, \"sinkage_m\": null}"),
                "%s", buf);
-    hid_t f = H5Fopen(path, H5F_ACC_RDONLY, H5P_DEFAULT);
-    ENSURE(f >= 0);
-    hid_t g = H5Gopen2(f, "/summary", H5P_DEFAULT);
-    hid_t at = H5Aopen(g, "set_down_sinkage", H5P_DEFAULT);
     double v = 0;
-    ENSURE(at >= 0 && H5Aread(at, H5T_NATIVE_DOUBLE, &v) >= 0 && isnan(v));
-    H5Aclose(at);
-    H5Gclose(g);
-    H5Fclose(f);
+    ENSURE(read_summary_number(dir, "set_down_sinkage", &v) == 0 && isnan(v));
     snprintf(buf, sizeof buf, "rm -rf %s", dir);
     ENSURE(system(buf) == 0);
     return 0;

@@ -262,8 +262,9 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
  * -ffp-contract=off forbids fused multiply-adds (target "avx2" does not
  * enable FMA), so the bits are those of pair_force on any CPU:
  * test_dem_threads runs the scalar, portable and AVX2 paths against each
- * other. Rolling resistance (dem_rolling_torque) is in the loop too, built
- * in only when some material pair has it. */
+ * other. Rolling resistance is built in only when some material pair has
+ * it: the constant torque (dem_rolling_torque) in the loop, the spring
+ * (dem_rolling_spring) in a second loop after it. */
 enum { BATCH = 64 };
 
 typedef struct pair_batch {
@@ -276,6 +277,7 @@ typedef struct pair_batch {
     double tix[BATCH], tiy[BATCH], tiz[BATCH], tjx[BATCH], tjy[BATCH], tjz[BATCH];
     double sx[BATCH], sy[BATCH], sz[BATCH];
     double ux[BATCH], uy[BATCH], uz[BATCH]; /* the new rolling rotation (spring model) */
+    double R[BATCH], fn[BATCH], sn[BATCH];  /* R*, |F_n| and S_n, from the first loop to the rolling spring's */
     /* block-crossing pairs computed in phase A, in their place among the
      * others: entry st_k[s] adds stored contribution st_c[s] of cf (the
      * kernel's lane for it is computed and not used) */
@@ -325,6 +327,7 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
     double *restrict otjx = b->tjx, *restrict otjy = b->tjy, *restrict otjz = b->tjz;
     double *restrict osx = b->sx, *restrict osy = b->sy, *restrict osz = b->sz;
     double *restrict oux = b->ux, *restrict ouy = b->uy, *restrict ouz = b->uz;
+    double *restrict oR = b->R, *restrict ofn = b->fn, *restrict osn = b->sn;
     const double dt = in->dt;
     const int n = b->n;
 #pragma omp simd
@@ -354,25 +357,39 @@ static inline __attribute__((always_inline)) void batch_forces_body(const pair_a
         double cx = ny * Fz - nz * Fy, cy = nz * Fx - nx * Fz, cz = nx * Fy - ny * Fx;
         double tix = cx * -li, tiy = cy * -li, tiz = cz * -li;
         double tjx = cx * -lj, tjy = cy * -lj, tjz = cz * -lj;
-        if (rolling) { /* added where the pair's mu_roll > 0 */
+        if (rolling == 1) { /* dem_rolling_torque, added where the pair's mu_roll > 0 */
             const int roll = cmr[c] > 0.0;
             double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j], trx, try_, trz;
-            if (rolling == 2) { /* dem_rolling_spring */
-                const double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
-                double ux = u0x, uy = u0y, uz = u0z;
-                dem_rolling_spring_lane(cmr[c], R, sn, f_n, rwx, rwy, rwz,
-                                        DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]), dt, &ux, &uy, &uz, &trx,
-                                        &try_, &trz);
-                oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
-            } else { /* dem_rolling_torque */
-                dem_rolling_torque_lane(cmr[c], R, f_n, rwx, rwy, rwz, 1.0 / (inv_i[i] + inv_i[j]), dt, &trx, &try_,
-                                        &trz);
-            }
+            dem_rolling_torque_lane(cmr[c], R, f_n, rwx, rwy, rwz, 1.0 / (inv_i[i] + inv_i[j]), dt, &trx, &try_,
+                                    &trz);
             tix = roll ? tix + trx : tix, tiy = roll ? tiy + try_ : tiy, tiz = roll ? tiz + trz : tiz;
             tjx = roll ? tjx - trx : tjx, tjy = roll ? tjy - try_ : tjy, tjz = roll ? tjz - trz : tjz;
         }
+        if (rolling == 2)
+            oR[k] = R, ofn[k] = f_n, osn[k] = sn;
         otix[k] = tix, otiy[k] = tiy, otiz[k] = tiz;
         otjx[k] = tjx, otjy[k] = tjy, otjz[k] = tjz;
+    }
+    if (rolling != 2)
+        return;
+    /* dem_rolling_spring, added where the pair's mu_roll > 0, in a loop of
+     * its own over the first one's R*, |F_n| and S_n: inside the first
+     * loop it made the body too long for the registers (spilled beyond 3 kB
+     * of stack); split, bench/dem's spring sand ran 1.31x faster on one
+     * thread and 1.33x on two, the same bits */
+#pragma omp simd
+    for (int k = 0; k < n; k++) {
+        const int i = bi[k], j = bj[k], c = uniform ? bc[0] : bc[k], p3 = hs * bp[k];
+        const int roll = cmr[c] > 0.0;
+        double rwx = wx[i] - wx[j], rwy = wy[i] - wy[j], rwz = wz[i] - wz[j], trx, try_, trz;
+        const double u0x = hist[p3 + 3], u0y = hist[p3 + 4], u0z = hist[p3 + 5];
+        double ux = u0x, uy = u0y, uz = u0z;
+        dem_rolling_spring_lane(cmr[c], oR[k], osn[k], ofn[k], rwx, rwy, rwz,
+                                DEM_SPHERE_ROLL_INERTIA / (inv_i[i] + inv_i[j]), dt, &ux, &uy, &uz, &trx, &try_, &trz);
+        oux[k] = roll ? ux : u0x, ouy[k] = roll ? uy : u0y, ouz[k] = roll ? uz : u0z;
+        const double tix = otix[k], tiy = otiy[k], tiz = otiz[k], tjx = otjx[k], tjy = otjy[k], tjz = otjz[k];
+        otix[k] = roll ? tix + trx : tix, otiy[k] = roll ? tiy + try_ : tiy, otiz[k] = roll ? tiz + trz : tiz;
+        otjx[k] = roll ? tjx - trx : tjx, otjy[k] = roll ? tjy - try_ : tjy, otjz[k] = roll ? tjz - trz : tjz;
     }
 }
 

@@ -1,11 +1,17 @@
 /* bench_dem: the DEM side of bench/dem/run.
  *   bench_dem prepare WORK_DIR          settle (or reload) the 20 000-grain bed,
  *                                       write WORK_DIR/bed.data for LIGGGHTS
- *   bench_dem run WORK_DIR THREADS STEPS [stirred]
+ *   bench_dem prepare WORK_DIR spring   the same for the rolling-spring sand
+ *                                       (its own cached bed; WORK_DIR/bed_spring.data)
+ *   bench_dem run WORK_DIR THREADS STEPS [stirred] [spring]
  *                                       time STEPS steps from the bed (at rest,
  *                                       or "stirred": every grain given a random
  *                                       velocity in [-0.5, 0.5] m/s per axis, so
- *                                       the neighbour list is rebuilt often),
+ *                                       the neighbour list is rebuilt often;
+ *                                       "spring": the sand with the rolling spring
+ *                                       of both scenes, DEM_ROLLING_SPRING with
+ *                                       μ_r 0.15, as LIGGGHTS' rolling_friction
+ *                                       epsd torsionTorque on),
  *                                       print "grain_steps_per_s <value>"
  *   bench_dem shapes WORK_DIR THREADS STEPS [N]
  *                                       settled bed of N (default 1500) random
@@ -17,7 +23,9 @@
  *                                       one run, print both rates and the ratio
  * Materials and step are fixed here and in in.bench (keep them equal):
  * radius 3.2775–3.6225 mm, density 2600 kg/m3, E 5e7 Pa, ν 0.3, e 0.5,
- * μ 0.6, dt 1e-5 s, box 0.2 x 0.2 m with floor and four side walls. */
+ * μ 0.6, dt 1e-5 s, box 0.2 x 0.2 m with floor and four side walls; the
+ * spring sand adds μ_r 0.15 and the damping ratio 0.3
+ * (DEM_ROLLING_DAMPING_RATIO). */
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -29,8 +37,10 @@
 #include "timer.h"
 
 static const dem_material SOIL = {.density = 2600.0, .young = 5e7, .poisson = 0.3, .restitution = 0.5, .friction = 0.6};
+/* the spring sand's rolling resistance (scenes/paper.cfg's μ_r) */
+#define SPRING_MU_ROLL 0.15
 
-static dem_bed_params bed_params(const char *dir)
+static dem_bed_params bed_params(const char *dir, int spring)
 {
     dem_bed_params p = dem_bed_params_default();
     double lo[3] = {0, 0, 0}, hi[3] = {0.2, 0.2, 1.0};
@@ -45,11 +55,12 @@ static dem_bed_params bed_params(const char *dir)
     p.settle_min_time = 0.3;
     p.settle_max_time = 3.0;
     p.settle_dt = 3e-5;    /* settling only; the benchmark runs 1e-5 */
-    snprintf(p.file, sizeof p.file, "%s/bed_20000.h5", dir);
+    snprintf(p.file, sizeof p.file, "%s/bed_20000%s.h5", dir, spring ? "_spring" : "");
     return p;
 }
 
-static int make_world(int threads, const char *dir, dem_world **w, cm_error *err)
+/* spring: the sand with the rolling spring (its own cached bed) */
+static int make_world(int threads, const char *dir, int spring, dem_world **w, cm_error *err)
 {
     dem_world_def d = dem_world_def_default();
     d.dt = 1e-5;
@@ -60,10 +71,15 @@ static int make_world(int threads, const char *dir, dem_world **w, cm_error *err
     const char *skin = getenv("DEM_BENCH_SKIN");
     if (skin)
         d.skin = atof(skin);
-    int rc = dem_world_create(&d, 1, &SOIL, w, err);
+    dem_material soil = SOIL;
+    if (spring) {
+        d.rolling_model = DEM_ROLLING_SPRING;
+        soil.rolling_friction = SPRING_MU_ROLL;
+    }
+    int rc = dem_world_create(&d, 1, &soil, w, err);
     if (rc)
         return rc;
-    dem_bed_params p = bed_params(dir);
+    dem_bed_params p = bed_params(dir, spring);
     bool loaded;
     return dem_bed_build(*w, &p, NULL, NULL, &loaded, err);
 }
@@ -151,7 +167,7 @@ static int make_shapes_world(int threads, const char *dir, int n, int angular, d
     int rc = dem_world_create(&d, 1, &SOIL, w, err);
     if (rc)
         return rc;
-    dem_bed_params p = bed_params(dir);
+    dem_bed_params p = bed_params(dir, 0);
     p.box_max[0] = p.box_max[1] = 0.1;
     p.layers[0].count = n;
     p.settle_ke = 1e-7; /* J per grain, the scenes' default */
@@ -207,29 +223,50 @@ static int run_shapes(const char *dir, int threads, int steps, int n, cm_error *
     return CM_OK;
 }
 
+/* The run's options after STEPS: "stirred" and/or "spring", each at most
+ * once; 0 if another word is given. */
+typedef struct run_opt {
+    int stirred, spring;
+} run_opt;
+
+static int run_options(int n, char **words, run_opt *o)
+{
+    *o = (run_opt){0, 0};
+    for (int k = 0; k < n; k++) {
+        int *flag = strcmp(words[k], "stirred") == 0 ? &o->stirred : strcmp(words[k], "spring") == 0 ? &o->spring : NULL;
+        if (!flag || *flag)
+            return 0;
+        *flag = 1;
+    }
+    return 1;
+}
+
 int main(int argc, char **argv)
 {
     cm_log_set_tag("bench_dem");
     cm_error err = {0};
     dem_world *w = NULL;
+    run_opt opt;
     int rc;
-    if (argc == 3 && strcmp(argv[1], "prepare") == 0) {
+    if ((argc == 3 || (argc == 4 && strcmp(argv[3], "spring") == 0)) && strcmp(argv[1], "prepare") == 0) {
         double t0 = cm_now();
-        rc = make_world(2, argv[2], &w, &err);
+        const int spring = argc == 4;
+        const char *tag = spring ? "_spring" : "";
+        rc = make_world(2, argv[2], spring, &w, &err);
         if (rc == CM_OK) {
             char path[2048];
-            snprintf(path, sizeof path, "%s/bed.data", argv[2]);
+            snprintf(path, sizeof path, "%s/bed%s.data", argv[2], tag);
             rc = write_liggghts_data(w, path, 0, &err);
-            snprintf(path, sizeof path, "%s/bed_stirred.data", argv[2]);
+            snprintf(path, sizeof path, "%s/bed%s_stirred.data", argv[2], tag);
             if (rc == CM_OK)
                 rc = write_liggghts_data(w, path, 1, &err);
             printf("bed ready: %d grains, height %.4f m (%.1f s)\n", dem_grain_count(w), dem_bed_height(w),
                    cm_now() - t0);
         }
-    } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "run") == 0) {
+    } else if (argc >= 5 && argc <= 7 && strcmp(argv[1], "run") == 0 && run_options(argc - 5, argv + 5, &opt)) {
         int threads = atoi(argv[3]), steps = atoi(argv[4]);
-        rc = make_world(threads, argv[2], &w, &err);
-        if (argc == 6 && strcmp(argv[5], "stirred") == 0)
+        rc = make_world(threads, argv[2], opt.spring, &w, &err);
+        if (opt.stirred)
             for (int i = 0; i < dem_grain_count(w) && rc == CM_OK; i++) {
                 double v[3];
                 stir_velocity(i, v);
@@ -260,8 +297,8 @@ int main(int argc, char **argv)
     } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "shapes") == 0) {
         rc = run_shapes(argv[2], atoi(argv[3]), atoi(argv[4]), argc == 6 ? atoi(argv[5]) : 1500, &err);
     } else {
-        fprintf(stderr, "usage: %s prepare WORK_DIR | run WORK_DIR THREADS STEPS [stirred] | shapes WORK_DIR THREADS "
-                        "STEPS [N]\n",
+        fprintf(stderr, "usage: %s prepare WORK_DIR [spring] | run WORK_DIR THREADS STEPS [stirred] [spring] | shapes "
+                        "WORK_DIR THREADS STEPS [N]\n",
                 argv[0]);
         return 2;
     }

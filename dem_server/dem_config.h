@@ -26,7 +26,7 @@ typedef struct dem_window_def {
     double shift;            /* m: removal happens in steps of this; length of each appended stretch */
     double sample_margin;    /* m: the appended stretch is taken this far inside the bed's end walls */
     double freeze_distance;  /* m: grains farther than this from the wheel centre (along x) are frozen; 0 = never,
-                              * < 0 = DEM_WINDOW_FREEZE_LENGTHS contact lengths (dem_window.h) */
+                              * < 0 = beyond the window's own behind and ahead (dem_window.h) */
     double expected_sinkage; /* m: for the footprint check at start */
 } dem_window_def;
 

@@ -135,8 +135,8 @@ int dem_window_create(const dem_world *w, const dem_window_def *def, dem_window 
         cm_log_info("window: grains farther than %.3f m from the wheel centre (along x) are frozen",
                     def->freeze_distance);
     else if (def->freeze_distance < 0)
-        cm_log_info("window: freezing distance: %.1f contact lengths, set when the tire arrives",
-                    DEM_WINDOW_FREEZE_LENGTHS);
+        cm_log_info("window: grains more than %.3f m behind or %.3f m ahead of the wheel centre (along x) are "
+                    "frozen (the window's own extents)", def->behind, def->ahead);
     *out = win;
     return CM_OK;
 }
@@ -318,13 +318,23 @@ static int front_due(const dem_window *win, double wheel_x) { return win->st.x_f
 
 static int freeze_due(const dem_window *win, double wheel_x, int changed)
 {
-    return win->def.freeze_distance > 0.0 && (changed || !(fabs(wheel_x - win->st.x_freeze) < win->r_max));
+    return win->def.freeze_distance != 0.0 && (changed || !(fabs(wheel_x - win->st.x_freeze) < win->r_max));
+}
+
+/* The live stretch [lo, hi] around the wheel centre: the window's own
+ * (behind, ahead), or +-freeze_distance when one is given. */
+static void live_stretch(const dem_window *win, double wheel_x, double *lo, double *hi)
+{
+    const dem_window_def *d = &win->def;
+    const int own = d->freeze_distance < 0.0;
+    *lo = wheel_x - (own ? d->behind : d->freeze_distance);
+    *hi = wheel_x + (own ? d->ahead : d->freeze_distance);
 }
 
 int dem_window_pending(const dem_window *win, double wheel_x, double *freeze_lo, double *freeze_hi)
 {
     const int shift = cut_due(win, wheel_x) || front_due(win, wheel_x);
-    *freeze_lo = wheel_x - win->def.freeze_distance, *freeze_hi = wheel_x + win->def.freeze_distance;
+    live_stretch(win, wheel_x, freeze_lo, freeze_hi);
     return shift ? DEM_WINDOW_SHIFT : freeze_due(win, wheel_x, shift) ? DEM_WINDOW_FREEZE : DEM_WINDOW_NONE;
 }
 
@@ -368,8 +378,10 @@ int dem_window_update(dem_window *win, dem_world *w, double wheel_x, cm_error *e
                     wheel_x, added, f_old, st->x_front, 100.0 * fraction, 100.0 * overlap, w->g.n);
     }
     if (freeze_due(win, wheel_x, changed)) {
+        double lo, hi;
+        live_stretch(win, wheel_x, &lo, &hi);
         st->x_freeze = wheel_x;
-        dem_freeze_outside_x(w, wheel_x - d->freeze_distance, wheel_x + d->freeze_distance);
+        dem_freeze_outside_x(w, lo, hi);
     }
     return CM_OK;
 }
@@ -401,11 +413,6 @@ int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_wi
         ahead = kf >= 0 ? w->walls[kf].p[0] - wheel_x : INFINITY;
         behind = kb >= 0 ? wheel_x - w->walls[kb].p[0] : INFINITY;
         k_ahead = "dem.bed.box_max[0] (or a dem.window)", k_behind = "wheel.center[0] or dem.bed.box_min[0]";
-    }
-    if (win && win->def.freeze_distance < 0) {
-        win->def.freeze_distance = DEM_WINDOW_FREEZE_LENGTHS * lc;
-        cm_log_info("window: grains farther than %.3f m (%.1f contact lengths) from the wheel centre (along x) are "
-                    "frozen", win->def.freeze_distance, DEM_WINDOW_FREEZE_LENGTHS);
     }
     if (ahead < 2.0 * lc) {
         cm_log_warn("the bed reaches only %.3f m ahead of the wheel centre%s, less than 2 contact lengths (%.3f m): "

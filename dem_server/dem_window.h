@@ -13,9 +13,12 @@
  *     period, the first where the grains against the front wall end; a copied
  *     grain that would overlap one already there is pushed forward just clear
  *     of it) and the front wall moves to the copy's end;
- *   - with freeze_distance > 0, grains with |x - x_c| > freeze_distance are
- *     frozen (dem_freeze_outside_x), re-evaluated every time x_c has moved by
- *     a grain radius.
+ *   - grains outside the live stretch are frozen (dem_freeze_outside_x),
+ *     re-evaluated every time x_c has moved by a grain radius: by default
+ *     (freeze_distance < 0) the window's own extents, x < x_c - behind or
+ *     x > x_c + ahead, the soil between them and the end walls (up to one
+ *     `shift` each) held still; with freeze_distance > 0, |x - x_c| >
+ *     freeze_distance; with 0, none.
  * Each shift is logged with the grains removed/added and the seam's density. */
 #ifndef DEM_WINDOW_H
 #define DEM_WINDOW_H
@@ -23,14 +26,18 @@
 #include "dem.h"
 #include "dem_config.h"
 
-/* Automatic freezing distance in contact lengths. Measured (rigid wheel
- * under 150 N, 20 % slip, tests/dem/test_dem_window.c freeze_distance_sweep,
- * two seeds): grains frozen beyond 1.1 contact lengths made the wheel sink
- * 22-30 % less and pull up to 2x the horizontal force (the frozen soil
- * ahead acts as a wall); beyond 1.7, 2.4 and 3.3 contact lengths sinkage and
- * force stayed within the seed-to-seed scatter of the long bed (sinkage
- * +-5 %, horizontal force +-4 N of 22 N). 2.5 keeps a margin. */
-#define DEM_WINDOW_FREEZE_LENGTHS 2.5
+/* Freezing (measured: a rigid wheel under 150 N, 20 % slip,
+ * tests/dem/test_dem_window.c freeze_distance_sweep, two seeds): grains
+ * frozen beyond 1.1 contact lengths made the wheel sink 22-30 % less and pull
+ * up to 2x the horizontal force (the frozen soil ahead acts as a wall); beyond
+ * 1.7, 2.4 and 3.3 contact lengths sinkage and force stayed within the
+ * seed-to-seed scatter of the long bed (sinkage +-5 %, horizontal force +-4 N
+ * of 22 N). The default freezes beyond the window's own extents: ahead >= 2
+ * contact lengths and behind >= 1 by the footprint check below, where the
+ * window already puts its end walls at the moment before each shift; frozen,
+ * the soil between them and the walls (up to one `shift`) costs nothing but
+ * its contacts with the live grains. Measured on the scenes: README "Speed,
+ * session 25". */
 
 /* Everything that changes while the window moves (for checkpoints: these
  * fields plus the world; the sample is re-read from the settled bed, see
@@ -70,9 +77,8 @@ void dem_window_free(dem_window **win);
  *                     floor bears > 65 % of the contact pressure: Boussinesq),
  *   0 < freeze_distance < 2 l.
  * win may be NULL (no window: the bed's ends at the wheel's start position
- * are checked, and `ahead` shrinks as the wheel travels). An automatic
- * freezing distance (def->freeze_distance < 0) is set here to
- * DEM_WINDOW_FREEZE_LENGTHS contact lengths. Returns the warnings given, as
+ * are checked, and `ahead` shrinks as the wheel travels). Returns the
+ * warnings given, as
  * DEM_FOOTPRINT_* bits (0: none). */
 enum {
     DEM_FOOTPRINT_AHEAD = 1,

@@ -404,6 +404,52 @@ static void cylinder_mesh(double R, double b, double *x, int *tri)
     }
 }
 
+/* Which grains the window freezes: by default those outside its own
+ * extents [x_c - behind, x_c + ahead], renewed as the wheel moves; with a
+ * freeze_distance those farther than it from x_c; with 0 none. A row of
+ * grains between end walls, 1 cm apart (x = 0.005 .. 0.295 m). */
+static int freeze_extents(void)
+{
+    const double xc[3] = {0.1, 0.101, 0.13}; /* the second within a radius of the first: not renewed */
+    const double dist[3] = {-1.0, 0.03, 0.0};
+    for (int k = 0; k < 3; k++) {
+        dem_material m = test_material(5e7, 0.3, 0.5, 0.5);
+        dem_world *w = test_world(&m, 1, 1e-5, 200, NULL, 1);
+        ENSURE(w);
+        cm_error err = {0};
+        const double floor_p[3] = {0, 0, 0}, floor_n[3] = {0, 0, 1};
+        const double back_p[3] = {0, 0, 0}, back_n[3] = {1, 0, 0}, front_p[3] = {0.3, 0, 0}, front_n[3] = {-1, 0, 0};
+        ENSURE(dem_wall_add(w, floor_p, floor_n, 0, &err) == 0 && dem_wall_add(w, back_p, back_n, 0, &err) == 0 &&
+               dem_wall_add(w, front_p, front_n, 0, &err) == 0);
+        for (int i = 0; i < 30; i++) {
+            double p[3] = {0.005 + 0.01 * i, 0.01, 0.004};
+            ENSURE(dem_grain_add(w, p, 0.004, 0, NULL, &err) == 0);
+        }
+        dem_window_def wd = {.enabled = true, .behind = 0.05, .ahead = 0.08, .shift = 0.1, .sample_margin = 0.01,
+                             .freeze_distance = dist[k], .expected_sinkage = 0.01};
+        dem_window *win = NULL;
+        ENSURE_MSG(dem_window_create(w, &wd, &win, &err) == 0, "%s", err.msg);
+        for (int s = 0; s < 3; s++) {
+            ENSURE_MSG(dem_window_update(win, w, xc[s], &err) == 0, "%s", err.msg);
+            const double at = xc[s == 1 ? 0 : s]; /* where the frozen set was last renewed */
+            const double lo = at - (dist[k] < 0 ? wd.behind : dist[k]), hi = at + (dist[k] < 0 ? wd.ahead : dist[k]);
+            int n_frozen = 0;
+            for (int id = 0; id < dem_grain_count(w); id++) {
+                dem_grain_state st;
+                dem_grain_get(w, id, &st);
+                const int want = dist[k] != 0.0 && (st.x[0] < lo || st.x[0] > hi);
+                ENSURE_MSG(w->g.frozen[w->g.slot_of[id]] == want, "freeze_distance %g, wheel at %g: grain at x = %g %s",
+                           dist[k], xc[s], st.x[0], want ? "live" : "frozen");
+                n_frozen += want;
+            }
+            ENSURE(k == 2 ? n_frozen == 0 : n_frozen > 0);
+        }
+        dem_window_free(&win);
+        dem_world_destroy(&w);
+    }
+    return 0;
+}
+
 typedef struct wheel_result {
     double fx;        /* N, mean horizontal force of the grains on the wheel over the steady part */
     double sinkage;   /* m, mean sinkage of the wheel's lowest point below the settled bed's surface */
@@ -613,7 +659,7 @@ static int window_config(void)
     return 0;
 }
 
-/* The measurement behind DEM_WINDOW_FREEZE_LENGTHS (run by hand:
+/* The measurement behind the freezing rules of dem_window.h (run by hand:
  * test_dem_window freeze_distance_sweep): the long bed, nothing removed nor
  * added, grains frozen beyond 0.12 .. 0.35 m (1.1 .. 3.3 contact lengths). */
 static int freeze_distance_sweep(void)
@@ -692,6 +738,7 @@ static const test_case tests[] = {
     {"add_copies", add_copies},
     {"wall_moves", wall_moves},
     {"frozen_grains", frozen_grains},
+    {"freeze_extents", freeze_extents},
     {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},
     {"footprint_floor", footprint_floor},

@@ -87,7 +87,7 @@ enum {
     DEM_FOOTPRINT_FLOOR = 8,
     DEM_FOOTPRINT_FREEZE = 16
 };
-int dem_window_check_footprint(dem_window *win, const dem_world *w, const dem_window_def *def, double wheel_x,
+int dem_window_check_footprint(const dem_window *win, const dem_world *w, const dem_window_def *def, double wheel_x,
                                double expected_sinkage);
 
 /* One exchange's update with the wheel centre's x. */

@@ -154,7 +154,8 @@ typedef struct dem_grain_state {
 int dem_grain_add(dem_world *w, const double x[3], double radius, int material, int *id, cm_error *err);
 int dem_grain_count(const dem_world *w);
 /* The build of the vectorised loops this world runs on this CPU:
- * "portable", "avx2" or "avx512" (enum dem_kernels). */
+ * "portable", "avx2" or "avx512" (enum dem_kernels; "avx512": its pair
+ * kernel, the others' AVX2). */
 const char *dem_kernels_name(const dem_world *w);
 int dem_grain_get(const dem_world *w, int id, dem_grain_state *s);
 /* Sets position, velocity and angular velocity (the rest of s is ignored). */

@@ -53,7 +53,8 @@ static pair_arrays pair_arrays_of(dem_world *w)
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
                      w->pj,    w->hist_val[w->hist_cur],   w->held,  w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c, dem_kernels_of(&w->def) >= DEM_KERNELS_AVX2};
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c,
+                     dem_kernels_of(&w->def) >= DEM_KERNELS_AVX2};
     return a;
 }
 
@@ -258,14 +259,14 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
  * pairs in contact: one loop the compiler vectorises, compiled for the
  * x86-64 baseline (SSE2, two lanes), for AVX2 (four lanes) and, with the
  * rolling spring, for AVX-512 (eight lanes), the widest chosen at start-up
- * (dem_kernels_of).
- * Every lane does IEEE operations on its own pair, branches become selects
- * of values computed both ways, and -ffp-contract=off forbids fused
- * multiply-adds (the targets "avx2" and "avx512f" do not enable FMA), so
- * the bits are those of pair_force on any CPU: test_dem_threads runs the
- * scalar, portable, AVX2 and AVX-512 paths against each other. Rolling resistance is built in only when some material pair has
- * it: the constant torque (dem_rolling_torque) in the loop, the spring
- * (dem_rolling_spring) in a second loop after it. */
+ * (dem_kernels_of). Every lane does IEEE operations on its own pair,
+ * branches become selects of values computed both ways, and
+ * -ffp-contract=off forbids fused multiply-adds (the targets "avx2" and
+ * "avx512f" do not enable FMA), so the bits are those of pair_force on any
+ * CPU: test_dem_threads runs the scalar, portable, AVX2 and AVX-512 paths
+ * against each other. Rolling resistance is built in only when some
+ * material pair has it: the constant torque (dem_rolling_torque) in the
+ * loop, the spring (dem_rolling_spring) in a second loop after it. */
 enum { BATCH = 64 };
 
 typedef struct pair_batch {
@@ -457,7 +458,7 @@ static batch_fn batch_kernel(const dem_world *w)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
     const int build = dem_kernels_of(&w->def);
-    if (build == DEM_KERNELS_AVX512 && w->def.rolling_model == DEM_ROLLING_SPRING)
+    if (build == DEM_KERNELS_AVX512) /* the rolling spring (dem_kernels_of) */
         return batch_forces_spring_avx512;
     if (build >= DEM_KERNELS_AVX2)
         return batch_forces_avx2;

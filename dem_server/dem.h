@@ -88,6 +88,15 @@ enum dem_rolling_model {
 
 /* ---- World ------------------------------------------------------------ */
 
+/* Builds of the vectorised loops, in the order of their width (the same
+ * bits in each: dem_pairs.c, "the batched kernel"). */
+enum dem_kernels {
+    DEM_KERNELS_AUTO = 0,  /* the best for this CPU */
+    DEM_KERNELS_PORTABLE,  /* the x86-64 baseline (SSE2) or any other CPU's */
+    DEM_KERNELS_AVX2,      /* four lanes */
+    DEM_KERNELS_AVX512     /* eight lanes */
+};
+
 typedef struct dem_world_def {
     double dt;               /* time step, s */
     double gravity[3];       /* m/s^2 */
@@ -102,8 +111,9 @@ typedef struct dem_world_def {
     int reorder_every;       /* re-sort grains by cell (and tag inside a cell) every N neighbour rebuilds
                                 (0 = never); 1 (the default) is needed by a distributed run */
     int rolling_model;       /* enum dem_rolling_model (default constant torque) */
-    bool portable_kernel;    /* true: the vectorised loops' portable builds (pairs, walls, integration) even
-                                where the CPU has AVX2 (the same bits either way; for the tests that show it) */
+    int kernels;             /* enum dem_kernels: the widest build of the vectorised loops (pairs, walls,
+                                integration) to run; DEM_KERNELS_AUTO (0, the default) the best for this CPU
+                                (dem_kernels_of). The same bits in every build; for the tests that show it */
     double gather_test_every; /* s, distributed: how often the surface contacts' gather to rank 0 is tested
                                  among the grain pairs (dem_step_surface_then); default 1.25e-4. A test costs
                                  a few us (MPI progress, a yield); testing seldom delays fem_server's step,
@@ -143,6 +153,10 @@ typedef struct dem_grain_state {
  * order of addition; ids are stable even when grains are re-sorted). */
 int dem_grain_add(dem_world *w, const double x[3], double radius, int material, int *id, cm_error *err);
 int dem_grain_count(const dem_world *w);
+/* The build of the vectorised loops this world runs on this CPU:
+ * "portable", "avx2" or "avx512" (enum dem_kernels; "avx512": its pair
+ * kernel, the others' AVX2). */
+const char *dem_kernels_name(const dem_world *w);
 int dem_grain_get(const dem_world *w, int id, dem_grain_state *s);
 /* Sets position, velocity and angular velocity (the rest of s is ignored). */
 int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], const double omega[3]);

@@ -598,11 +598,13 @@ static int run(const options *o)
     double t_rayleigh, t_hertz;
     dem_time_limits(w, &t_rayleigh, &t_hertz);
     if (g_rank == 0) /* the others hold no grain yet */
-        cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s); rolling resistance: %s",
+        cm_log_info("%d grains; dt = %.3g s (Rayleigh time %.3g s, Hertz contact time %.3g s); rolling resistance: "
+                    "%s; vector loops: %s",
                     dem_grain_count(w), rcfg.dt, t_rayleigh, t_hertz,
-                    cfg.world.rolling_model == DEM_ROLLING_SPRING ? "spring" : "constant torque");
+                    cfg.world.rolling_model == DEM_ROLLING_SPRING ? "spring" : "constant torque", dem_kernels_name(w));
     cm_runrec_num(&rec, "grains", dem_grain_count(w));
     cm_runrec_num(&rec, "dt", rcfg.dt);
+    cm_runrec_text(&rec, "kernels", dem_kernels_name(w));
     cm_runrec_num(&rec, "exchange_every", rcfg.exchange_every);
     cm_runrec_num(&rec, "t_rayleigh", t_rayleigh);
     cm_runrec_num(&rec, "t_hertz", t_hertz);

@@ -44,7 +44,7 @@ typedef struct pair_arrays {
     double dt;
     int roll_spring;    /* DEM_ROLLING_SPRING: history rows of DEM_HIST_MAX, the rolling rotation at + 3 */
     int one_c;          /* every grain of one material: the pairs' coefficient index (dem_pair_plan.one_c), else -1 */
-    int avx2;           /* the candidates' test in its AVX2 build (dem_kernels_avx2) */
+    int avx2;           /* the candidates' test in its AVX2 build (dem_kernels_of at least DEM_KERNELS_AVX2) */
 } pair_arrays;
 
 static pair_arrays pair_arrays_of(dem_world *w)
@@ -53,7 +53,8 @@ static pair_arrays pair_arrays_of(dem_world *w)
     pair_arrays a = {g->x,     g->y,   g->z,     g->vx,    g->vy,   g->vz,   g->wx,
                      g->wy,    g->wz,  g->r,     g->inv_m, g->inv_i, g->mat, w->pi,
                      w->pj,    w->hist_val[w->hist_cur],   w->held,  w->coef,  w->def.dt,
-                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c, dem_kernels_avx2(&w->def)};
+                     w->def.rolling_model == DEM_ROLLING_SPRING, w->plan.one_c,
+                     dem_kernels_of(&w->def) >= DEM_KERNELS_AVX2};
     return a;
 }
 
@@ -255,16 +256,17 @@ int dem_pair_plan_build(dem_world *w, cm_error *err)
 /* ---- the batched kernel ------------------------------------------------
  *
  * The same arithmetic as pair_force, in the same order, for a batch of
- * pairs in contact: one loop the compiler vectorises, compiled twice: for
- * the x86-64 baseline (SSE2, two lanes) and for AVX2 (four lanes, chosen
- * when the CPU has it). Every lane does IEEE operations on its own pair,
+ * pairs in contact: one loop the compiler vectorises, compiled for the
+ * x86-64 baseline (SSE2, two lanes), for AVX2 (four lanes) and, with the
+ * rolling spring, for AVX-512 (eight lanes), the widest chosen at start-up
+ * (dem_kernels_of). Every lane does IEEE operations on its own pair,
  * branches become selects of values computed both ways, and
- * -ffp-contract=off forbids fused multiply-adds (target "avx2" does not
- * enable FMA), so the bits are those of pair_force on any CPU:
- * test_dem_threads runs the scalar, portable and AVX2 paths against each
- * other. Rolling resistance is built in only when some material pair has
- * it: the constant torque (dem_rolling_torque) in the loop, the spring
- * (dem_rolling_spring) in a second loop after it. */
+ * -ffp-contract=off forbids fused multiply-adds (the targets "avx2" and
+ * "avx512f" do not enable FMA), so the bits are those of pair_force on any
+ * CPU: test_dem_threads runs the scalar, portable, AVX2 and AVX-512 paths
+ * against each other. Rolling resistance is built in only when some
+ * material pair has it: the constant torque (dem_rolling_torque) in the
+ * loop, the spring (dem_rolling_spring) in a second loop after it. */
 enum { BATCH = 64 };
 
 typedef struct pair_batch {
@@ -432,6 +434,17 @@ __attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays 
 {
     batch_forces_dispatch(in, ct, b);
 }
+
+/* Eight lanes, for the rolling spring only (dem_kernels_of): GCC keeps
+ * to 256-bit vectors for AVX-512 targets unless told to prefer 512. */
+__attribute__((target("avx512f,avx512dq,avx512vl,prefer-vector-width=512"))) static void
+batch_forces_spring_avx512(const pair_arrays *in, const coef_table *ct, pair_batch *b)
+{
+    if (in->one_c >= 0 || batch_uniform(b))
+        batch_forces_body(in, ct, b, 2, 1);
+    else
+        batch_forces_body(in, ct, b, 2, 0);
+}
 #endif
 
 static void batch_forces_portable(const pair_arrays *in, const coef_table *ct, pair_batch *b)
@@ -444,7 +457,10 @@ typedef void (*batch_fn)(const pair_arrays *, const coef_table *, pair_batch *);
 static batch_fn batch_kernel(const dem_world *w)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
-    if (dem_kernels_avx2(&w->def))
+    const int build = dem_kernels_of(&w->def);
+    if (build == DEM_KERNELS_AVX512) /* the rolling spring (dem_kernels_of) */
+        return batch_forces_spring_avx512;
+    if (build >= DEM_KERNELS_AVX2)
         return batch_forces_avx2;
 #endif
     return batch_forces_portable;

@@ -219,7 +219,7 @@ static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *re
         }
     wall_fn kernel = wall_forces_portable;
 #if defined(__x86_64__) && defined(__GNUC__)
-    if (dem_kernels_avx2(&w->def))
+    if (dem_kernels_of(&w->def) >= DEM_KERNELS_AVX2) /* no AVX-512 build: see dem_kernels_of */
         kernel = wall_forces_avx2;
 #endif
     wall_batch b;
@@ -525,13 +525,15 @@ __attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo,
 }
 #endif
 
-/* The AVX2 build of the loop where avx2 (dem_kernels_avx2): the same bits,
- * as for the pair kernel. */
-static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, int avx2)
+/* The AVX2 build of the loop where dem_kernels_of allows it (build; no
+ * AVX-512 build: see there): the same bits, as for the pair kernel. */
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, int build)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
-    if (avx2)
+    if (build >= DEM_KERNELS_AVX2)
         return integrate_avx2(g, lo, hi, dt, maxd2);
+#else
+    (void)build;
 #endif
     return integrate_body(g, lo, hi, dt, maxd2);
 }
@@ -545,7 +547,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     const int nt = w->n_threads;
     const int g0 = w->dist ? w->own_lo : 0, n = w->dist ? w->own_hi : g->n; /* the owned grains */
     const double dt = w->def.dt;
-    const int shaped = w->n_shaped > 0, avx2 = dem_kernels_avx2(&w->def);
+    const int shaped = w->n_shaped > 0, build = dem_kernels_of(&w->def);
     double maxd2 = 0.0;
     int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
@@ -554,7 +556,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, g0, n, dt, &maxd2, avx2);
+        bad = integrate_range(g, g0, n, dt, &maxd2, build);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -563,7 +565,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             int tid = dem_thread_id();
             double m2;
             const long no = n - g0;
-            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2, avx2);
+            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2, build);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;
         }

@@ -360,6 +360,18 @@ int dem_grain_set_orientation(dem_world *w, int id, const double q[4])
 
 int dem_grain_count(const dem_world *w) { return w->g.n; }
 
+const char *dem_kernels_name(const dem_world *w)
+{
+    switch (dem_kernels_of(&w->def)) {
+    case DEM_KERNELS_AVX512:
+        return "avx512";
+    case DEM_KERNELS_AVX2:
+        return "avx2";
+    default:
+        return "portable";
+    }
+}
+
 int dem_grain_get(const dem_world *w, int id, dem_grain_state *s)
 {
     const dem_grains *g = &w->g;

@@ -26,16 +26,30 @@ static inline int dem_thread_id(void)
 #endif
 }
 
-/* 1: the vectorised loops (pairs, walls, integration) run their AVX2
- * builds: the CPU has AVX2 and the world does not ask for the portable
- * ones (dem_world_def.portable_kernel; the same bits either way). */
-static inline int dem_kernels_avx2(const dem_world_def *def)
+/* The build of the vectorised loops (pairs, walls, integration) that runs
+ * (enum dem_kernels, never AUTO): the widest this CPU has, at most
+ * def->kernels. AVX-512 only for the pair kernel with the rolling spring
+ * (the other loops then run their AVX2 builds), where the CPU has it,
+ * except AMD's family 19h (Zen 4), whose 512-bit operations run as two
+ * 256-bit halves: there the AVX-512 pair kernel ran 0.89-1.03x the AVX2
+ * one (README, "Speed, session 19" and "session 24"). On Zen 5 (bench_dem,
+ * one thread, best of six, session 26) the pair kernel with the rolling
+ * spring ran 1.17-1.21x faster in eight lanes, without it 0.93x, and the
+ * integration 0.7x. */
+static inline int dem_kernels_of(const dem_world_def *def)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
-    return !def->portable_kernel && __builtin_cpu_supports("avx2");
+    int best = DEM_KERNELS_PORTABLE;
+    if (__builtin_cpu_supports("avx2"))
+        best = def->rolling_model == DEM_ROLLING_SPRING && __builtin_cpu_supports("avx512f") &&
+                       __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl") &&
+                       !__builtin_cpu_is("amdfam19h")
+                   ? DEM_KERNELS_AVX512
+                   : DEM_KERNELS_AVX2;
+    return def->kernels == DEM_KERNELS_AUTO || def->kernels > best ? best : def->kernels;
 #else
     (void)def;
-    return 0;
+    return DEM_KERNELS_PORTABLE;
 #endif
 }
 

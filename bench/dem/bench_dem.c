@@ -71,6 +71,15 @@ static int make_world(int threads, const char *dir, int spring, dem_world **w, c
     const char *skin = getenv("DEM_BENCH_SKIN");
     if (skin)
         d.skin = atof(skin);
+    /* DEM_BENCH_KERNELS: the widest build of the vectorised loops,
+     * "portable", "avx2" or "avx512" (default: the best for this CPU), to
+     * time the builds against each other in one binary */
+    const char *kb = getenv("DEM_BENCH_KERNELS");
+    if (kb)
+        d.kernels = strcmp(kb, "portable") == 0 ? DEM_KERNELS_PORTABLE
+                    : strcmp(kb, "avx2") == 0   ? DEM_KERNELS_AVX2
+                    : strcmp(kb, "avx512") == 0 ? DEM_KERNELS_AVX512
+                                                : DEM_KERNELS_AUTO;
     dem_material soil = SOIL;
     if (spring) {
         d.rolling_model = DEM_ROLLING_SPRING;
@@ -293,6 +302,7 @@ int main(int argc, char **argv)
             print_profile(&s.profile);
             printf("grain_steps_per_s %.6g\n", (double)dem_grain_count(w) * steps / t);
             printf("dem_world_hash %016llx\n", (unsigned long long)dem_world_hash(w));
+            printf("kernels %s\n", dem_kernels_name(w));
         }
     } else if ((argc == 5 || argc == 6) && strcmp(argv[1], "shapes") == 0) {
         rc = run_shapes(argv[2], atoi(argv[3]), atoi(argv[4]), argc == 6 ? atoi(argv[5]) : 1500, &err);

@@ -588,7 +588,8 @@ static int walls_batched_as_scalar(void)
         dem_world_def d = dem_world_def_default();
         d.dt = dt, d.max_grains = N, d.threads = 1, d.rolling_model = model;
         d.gravity[0] = d.gravity[1] = d.gravity[2] = 0.0;
-        d.portable_kernel = variant == 2; /* the constant torque once more, on the portable build */
+        /* the constant torque once more, on the portable build */
+        d.kernels = variant == 2 ? DEM_KERNELS_PORTABLE : DEM_KERNELS_AUTO;
         dem_world *w = NULL;
         cm_error err = {0};
         ENSURE(dem_world_create(&d, 1, &m, &w, &err) == 0);

@@ -3,6 +3,7 @@
  * gives the same bits with 1, 2 or 3 OpenMP threads (Box2D's determinism
  * test: the final state hashed across thread counts). */
 #include <stdlib.h>
+#include <string.h>
 
 #include "dem_bed.h"
 #include "dem_world.h"
@@ -26,11 +27,14 @@ static uint64_t fold(uint64_t h, const void *p, size_t n)
 typedef struct bed_case {
     int n, steps;
     bool stirred, surface, frozen;
-    bool portable; /* the pair kernel's portable path even where the CPU has AVX2 */
+    int kernels;   /* enum dem_kernels: the widest build of the vectorised loops (0: the CPU's best) */
     bool spring;   /* DEM_ROLLING_SPRING instead of the constant torque */
     int two_mat;   /* two materials alike, the grains of the first (1) or of both, alternately (2); two
                       different materials, alternately (3) */
 } bed_case;
+
+/* the build of the vectorised loops that run_bed's last world ran (dem_kernels_name) */
+static const char *g_kernels_ran = "";
 
 static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, double *wall_s)
 {
@@ -42,7 +46,7 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
     d.max_grains = n;
     d.threads = threads;
     d.gravity[2] = -9.81;
-    d.portable_kernel = c.portable;
+    d.kernels = c.kernels;
     d.rolling_model = c.spring ? DEM_ROLLING_SPRING : DEM_ROLLING_CONSTANT_TORQUE;
     dem_world *w = NULL;
     cm_error err = {0};
@@ -111,28 +115,36 @@ static int run_bed(int threads, bed_case c, uint64_t *hash, dem_stats *st, doubl
             *hash = (*hash ^ b[k]) * 1099511628211ULL;
     }
     dem_world_stats(w, st);
+    g_kernels_ran = dem_kernels_name(w);
     dem_world_destroy(&w);
     return 0;
 }
 
-/* One thread runs the batched pair kernel (AVX2 where the CPU has it), a
- * fourth run its portable path; with 2 and 3 threads most pairs go through
- * the same batches, the block-crossing ones through the scalar pair_force:
- * equal hashes say all paths give the same bits. */
+/* One thread runs the batched pair kernel (the CPU's widest build: AVX2,
+ * or AVX-512 with the rolling spring), a fourth run its portable path and
+ * a fifth at most its AVX2 build; with 2 and 3 threads most pairs go
+ * through the same batches, the block-crossing ones through the scalar
+ * pair_force: equal hashes say all paths give the same bits. */
 static int same_bits_for_thread_counts(bool stirred, bool surface, bool frozen, bool spring)
 {
-    uint64_t h[4];
-    dem_stats st[4];
+    uint64_t h[5];
+    dem_stats st[5];
     double wall;
     bed_case c = {.n = 400, .steps = 1500, .stirred = stirred, .surface = surface, .frozen = frozen, .spring = spring};
     for (int t = 0; t < 3; t++)
         ENSURE(run_bed(t + 1, c, &h[t], &st[t], &wall) == 0);
-    c.portable = true;
+    const char *best = g_kernels_ran;
+    c.kernels = DEM_KERNELS_PORTABLE;
     ENSURE(run_bed(1, c, &h[3], &st[3], &wall) == 0);
-    printf("hash with 1, 2, 3 threads: %016llx %016llx %016llx, portable kernel %016llx; %d grain-grain contacts, "
-           "%d grain-wall, %d grain-surface, %ld rebuilds\n",
-           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], (unsigned long long)h[3],
-           st[0].contacts_gg, st[0].contacts_gw, st[0].contacts_gs, st[0].profile.rebuilds);
+    ENSURE(strcmp(g_kernels_ran, "portable") == 0);
+    c.kernels = DEM_KERNELS_AVX2;
+    ENSURE(run_bed(1, c, &h[4], &st[4], &wall) == 0);
+    printf("hash with 1, 2, 3 threads: %016llx %016llx %016llx (%s), portable kernels %016llx, at most AVX2 %016llx "
+           "(%s); %d grain-grain contacts, %d grain-wall, %d grain-surface, %ld rebuilds\n",
+           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], best,
+           (unsigned long long)h[3], (unsigned long long)h[4], g_kernels_ran, st[0].contacts_gg, st[0].contacts_gw,
+           st[0].contacts_gs, st[0].profile.rebuilds);
+    ENSURE(h[0] == h[4]);
     /* the scene must exercise what it claims: pairs in contact and rebuilds */
     ENSURE(st[0].contacts_gg > 50);
     ENSURE(st[0].profile.rebuilds > 5);
@@ -211,30 +223,38 @@ static int same_bits_two_materials(void)
 /* Two different materials, alternately: every pair's coefficients looked
  * up by its two grains (a lookup by the wrong grain gives a 0–1 pair the
  * coefficients of 0–0 or 1–1): the batched kernel with its AVX2 candidate
- * test, its portable path and two threads give the same bits, and not those
- * of the two materials alike. */
-static int same_bits_two_materials_differ(void)
+ * test (and with the spring its AVX-512 build where the CPU has it), its
+ * portable path, its AVX2 build and two threads give the same bits, and not
+ * those of the two materials alike. */
+static int two_materials_differ(bool spring)
 {
-    uint64_t h[4];
+    uint64_t h[5];
     dem_stats st;
     double wall;
-    bed_case c = {.n = 400, .steps = 1500, .stirred = true, .two_mat = 3};
+    bed_case c = {.n = 400, .steps = 1500, .stirred = true, .two_mat = 3, .spring = spring};
     ENSURE(run_bed(1, c, &h[0], &st, &wall) == 0);
+    const char *best = g_kernels_ran;
     ENSURE(run_bed(2, c, &h[1], &st, &wall) == 0);
-    c.portable = true;
+    c.kernels = DEM_KERNELS_PORTABLE;
     ENSURE(run_bed(1, c, &h[2], &st, &wall) == 0);
-    c.two_mat = 2, c.portable = false;
+    c.kernels = DEM_KERNELS_AVX2;
+    ENSURE(run_bed(1, c, &h[4], &st, &wall) == 0);
+    c.two_mat = 2, c.kernels = DEM_KERNELS_AUTO;
     ENSURE(run_bed(1, c, &h[3], &st, &wall) == 0);
-    printf("hash two materials %016llx (2 threads %016llx, portable %016llx), alike %016llx; %d grain-grain "
-           "contacts\n",
-           (unsigned long long)h[0], (unsigned long long)h[1], (unsigned long long)h[2], (unsigned long long)h[3],
-           st.contacts_gg);
+    printf("hash two materials %016llx (%s; 2 threads %016llx, portable %016llx, at most AVX2 %016llx), alike "
+           "%016llx; %d grain-grain contacts\n",
+           (unsigned long long)h[0], best, (unsigned long long)h[1], (unsigned long long)h[2],
+           (unsigned long long)h[4], (unsigned long long)h[3], st.contacts_gg);
     ENSURE(st.contacts_gg > 50);
     ENSURE(h[0] == h[1]);
     ENSURE(h[0] == h[2]);
+    ENSURE(h[0] == h[4]);
     ENSURE(h[0] != h[3]);
     return 0;
 }
+
+static int same_bits_two_materials_differ(void) { return two_materials_differ(false); }
+static int same_bits_two_materials_differ_spring(void) { return two_materials_differ(true); }
 
 /* The neighbour list against brute force: a cloud of grains of three sizes
  * (cells of several grains, grains on cell and grid edges), searched with
@@ -307,6 +327,7 @@ static int neighbour_list_brute_force(void)
 static const test_case tests[] = {{"neighbour_list_brute_force", neighbour_list_brute_force},
                                   {"same_bits_two_materials", same_bits_two_materials},
                                   {"same_bits_two_materials_differ", same_bits_two_materials_differ},
+                                  {"same_bits_two_materials_differ_spring", same_bits_two_materials_differ_spring},
                                   {"same_bits_1_2_3_threads", same_bits_1_2_3_threads},
                                   {"same_bits_stirred", same_bits_stirred},
                                   {"same_bits_with_surface", same_bits_with_surface},

@@ -436,7 +436,10 @@ __attribute__((target("avx2"))) static void batch_forces_avx2(const pair_arrays 
 }
 
 /* Eight lanes, for the rolling spring only (dem_kernels_of): GCC keeps
- * to 256-bit vectors for AVX-512 targets unless told to prefer 512. */
+ * to 256-bit vectors for AVX-512 targets unless told to prefer 512. Its two
+ * spring instances only, not batch_forces_dispatch's six: built through the
+ * dispatch, the same bits ran the spring's pairs 0.87-0.90x as fast
+ * (bench_dem, best of six, session 26). */
 __attribute__((target("avx512f,avx512dq,avx512vl,prefer-vector-width=512"))) static void
 batch_forces_spring_avx512(const pair_arrays *in, const coef_table *ct, pair_batch *b)
 {

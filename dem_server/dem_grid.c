@@ -118,6 +118,10 @@ static int grid_build(dem_world *w, dem_grid_dims *gd)
         if (!a)
             return CM_ERR_NOMEM;
         w->cell_pos = a;
+        double *m = realloc(w->cell_rmax, (size_t)(ncell + 1) * sizeof *m);
+        if (!m)
+            return CM_ERR_NOMEM;
+        w->cell_rmax = m;
         w->cell_cap = (int)(ncell + 1);
     }
     if (!w->cell_items) { /* once */
@@ -126,9 +130,12 @@ static int grid_build(dem_world *w, dem_grid_dims *gd)
             return CM_ERR_NOMEM;
     }
     memset(w->cell_start, 0, (size_t)(ncell + 1) * sizeof *w->cell_start);
+    memset(w->cell_rmax, 0, (size_t)ncell * sizeof *w->cell_rmax);
     for (int i = 0; i < g->n; i++) {
-        w->grain_cell[i] = cell_of(gd, g->x[i], g->y[i], g->z[i]);
-        w->cell_start[w->grain_cell[i] + 1]++;
+        const int c = cell_of(gd, g->x[i], g->y[i], g->z[i]);
+        w->grain_cell[i] = c;
+        w->cell_start[c + 1]++;
+        w->cell_rmax[c] = fmax(w->cell_rmax[c], g->r[i]);
     }
     for (long c = 0; c < ncell; c++)
         w->cell_start[c + 1] += w->cell_start[c];
@@ -230,12 +237,47 @@ static int rows_room(dem_world *w, dem_thread_buf *tb, int to_list, long n, long
     return 0;
 }
 
+/* The search's reach. Grain j can be a candidate of grain i only within
+ * r_i + r_j + skin of it, so a neighbour cell farther from i than
+ * r_i + skin + (the cell's largest radius) holds none: in a bed of fine
+ * grains over coarse ones (cells sized by the coarse), most of the 27 cells
+ * around a fine grain. Testing the cells pays only for grains well smaller
+ * than the cells (reach_prunes); in a bed of one size it would cost more
+ * than it saves. gap2 gets the squared distance of coordinate v (in cell c
+ * along axis k) to the cells c - 1, c, c + 1 along that axis (0 inside, or
+ * where v lies past the face: a grain clamped into an edge cell). The faces
+ * are computed as axis_cell places grains, with a margin of 1e-6 cells for
+ * their rounding: a cell left out holds no candidate, and the lists are
+ * those of the whole 27-cell walk, pair for pair. */
+static inline void axis_gap2(const dem_grid_dims *gd, int k, int c, double v, double gap2[3])
+{
+    const double below = v - (c + gd->base[k]) * gd->h, above = (c + 1 + gd->base[k]) * gd->h - v;
+    gap2[0] = below > 0.0 ? below * below : 0.0;
+    gap2[1] = 0.0;
+    gap2[2] = above > 0.0 ? above * above : 0.0;
+}
+
+/* 1 if the cells are worth testing for grain i (ri_skin = r_i + skin): its
+ * reach against the largest grain is under 0.9 of a cell. */
+static inline int reach_prunes(const dem_world *w, const dem_grid_dims *gd, double ri_skin)
+{
+    return ri_skin + w->r_max < 0.9 * gd->h;
+}
+
+/* 1 if cell cc, at squared distance d2 from grain i, can hold a candidate
+ * of i. */
+static inline int cell_in_reach(const dem_world *w, const dem_grid_dims *gd, long cc, double d2, double ri_skin)
+{
+    const double reach = ri_skin + w->cell_rmax[cc] + 1e-6 * gd->h;
+    return d2 < reach * reach;
+}
+
 /* The candidate pairs of rows [i0, i1): each grain's neighbours in the 27
- * cells around it, within r_i + r_j + skin, later in the grain order (a
- * left ghost pairs with owned grains only), partners in a fixed cell order.
- * The first rows' thread (to_list) writes them into the pair list itself,
- * the others into tb->rows; both grow as needed. Returns the count, -1 when
- * out of memory; *n_cross counts the pairs with a ghost. */
+ * cells around it (those in reach), within r_i + r_j + skin, later in the
+ * grain order (a left ghost pairs with owned grains only), partners in a
+ * fixed cell order. The first rows' thread (to_list) writes them into the
+ * pair list itself, the others into tb->rows; both grow as needed. Returns
+ * the count, -1 when out of memory; *n_cross counts the pairs with a ghost. */
 static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb, int to_list,
                         long *n_cross)
 {
@@ -249,7 +291,9 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
         const int jmin = i < own_lo ? own_lo - 1 : i;
         int c = w->grain_cell[i];
         int cz = c % gd->n[2], cy = (c / gd->n[2]) % gd->n[1], cx = c / (gd->n[2] * gd->n[1]);
-        double ri = r[i] + skin;
+        double ri = r[i] + skin, gx2[3], gy2[3], gz2[3];
+        const int prune = reach_prunes(w, gd, ri);
+        axis_gap2(gd, 0, cx, x[i], gx2), axis_gap2(gd, 1, cy, y[i], gy2), axis_gap2(gd, 2, cz, z[i], gz2);
         for (int dx = -1; dx <= 1; dx++) {
             int ix = cx + dx;
             if (ix < 0 || ix >= gd->n[0])
@@ -263,6 +307,8 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
                     if (iz < 0 || iz >= gd->n[2])
                         continue;
                     int cc = (ix * gd->n[1] + iy) * gd->n[2] + iz;
+                    if (prune && !cell_in_reach(w, gd, cc, gx2[dx + 1] + gy2[dy + 1] + gz2[dz + 1], ri))
+                        continue;
                     for (int k = cell_start[cc]; k < cell_start[cc + 1]; k++) {
                         int j = cell_items[k];
                         if (j <= jmin)
@@ -287,50 +333,87 @@ static long search_rows(dem_world *w, const dem_grid_dims *gd, int i0, int i1, d
     return n;
 }
 
+/* Row i's partners to test and where they go (search_rows_sorted). */
+typedef struct scan_row {
+    const double *restrict x, *restrict y, *restrict z, *restrict r;
+    double xi, yi, zi, ri; /* ri: r_i + skin */
+    int i, left, own_hi;   /* left: i is a left ghost */
+} scan_row;
+
+/* The slots k0 .. k1 - 1 tested as partners of row s->i, from the n-th
+ * pair on: every slot is written, and the count advanced by the test (no
+ * branch on it). Returns the new count, -1 when out of memory. */
+static inline __attribute__((always_inline)) long scan_slots(dem_world *w, dem_thread_buf *tb, int to_list,
+                                                              const scan_row *s, long n, int k0, int k1, long *nc)
+{
+    if (rows_room(w, tb, to_list, n, k1 - k0))
+        return -1;
+    int *di = to_list ? w->pi : tb->rows, *dj = to_list ? w->pj : tb->rows + 1;
+    const long st = to_list ? 1 : 2;
+    long c = 0;
+    for (int j = k0; j < k1; j++) {
+        const double ex = s->xi - s->x[j], ey = s->yi - s->y[j], ez = s->zi - s->z[j];
+        const double cut = s->ri + s->r[j];
+        const int hit = !(ex * ex + ey * ey + ez * ez >= cut * cut);
+        di[st * n] = s->i, dj[st * n] = j;
+        c += hit & (s->left | (j >= s->own_hi));
+        n += hit;
+    }
+    *nc += c;
+    return n;
+}
+
 /* search_rows for grains sorted by cell (slot order is cell order, z
- * fastest): the three cells cz - 1 .. cz + 1 of a column (dx, dy) are one
- * range of slots, in the order the 27-cell walk takes them, so nine ranges
- * give the same pairs in the same order; slots up to jmin are cut off each
- * range's front. Every slot of a range is tested and written, and the count
- * advanced by the test (no branch on it). */
+ * fastest): the cells cz - 1 .. cz + 1 of a column (dx, dy), less those out
+ * of reach at either end where the reach prunes, are one range of slots, in
+ * the order the 27-cell walk takes them, so nine ranges give the same pairs
+ * in the same order; slots up to jmin are cut off each range's front. */
 static long search_rows_sorted(dem_world *w, const dem_grid_dims *gd, int i0, int i1, dem_thread_buf *tb,
                                int to_list, long *n_cross)
 {
     const dem_grains *g = &w->g;
-    const int own_lo = w->own_lo, own_hi = w->own_hi;
-    const double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z, *restrict r = g->r;
+    const int own_lo = w->own_lo;
     const int *cell_start = w->cell_start;
     const int n0 = gd->n[0], n1 = gd->n[1], n2 = gd->n[2];
-    const double skin = w->skin;
+    scan_row s = {.x = g->x, .y = g->y, .z = g->z, .r = g->r, .own_hi = w->own_hi};
     long n = 0, nc = 0;
     for (int i = i0; i < i1; i++) {
         const int jmin = i < own_lo ? own_lo - 1 : i;
         const int c = w->grain_cell[i];
         const int cz = c % n2, cy = (c / n2) % n1, cx = c / (n2 * n1);
         const int z0 = cz > 0 ? cz - 1 : 0, z1 = cz + 1 < n2 ? cz + 1 : n2 - 1;
-        const double xi = x[i], yi = y[i], zi = z[i], ri = r[i] + skin;
-        const int left = i < own_lo;
-        for (int ix = cx > 0 ? cx - 1 : 0; ix <= cx + 1 && ix < n0; ix++)
-            for (int iy = cy > 0 ? cy - 1 : 0; iy <= cy + 1 && iy < n1; iy++) {
-                const int col = (ix * n1 + iy) * n2;
-                int k0 = cell_start[col + z0];
-                const int k1 = cell_start[col + z1 + 1];
-                if (k0 <= jmin)
-                    k0 = jmin + 1;
-                if (k0 >= k1)
-                    continue;
-                if (rows_room(w, tb, to_list, n, k1 - k0))
-                    return -1;
-                int *di = to_list ? w->pi : tb->rows, *dj = to_list ? w->pj : tb->rows + 1;
-                const long st = to_list ? 1 : 2;
-                for (int j = k0; j < k1; j++) {
-                    const double ex = xi - x[j], ey = yi - y[j], ez = zi - z[j];
-                    const double cut = ri + r[j];
-                    const int hit = !(ex * ex + ey * ey + ez * ez >= cut * cut);
-                    di[st * n] = i, dj[st * n] = j;
-                    nc += hit & (left | (j >= own_hi));
-                    n += hit;
+        const int ix0 = cx > 0 ? cx - 1 : 0, ix1 = cx + 1 < n0 ? cx + 1 : n0 - 1;
+        const int iy0 = cy > 0 ? cy - 1 : 0, iy1 = cy + 1 < n1 ? cy + 1 : n1 - 1;
+        s.xi = g->x[i], s.yi = g->y[i], s.zi = g->z[i], s.ri = g->r[i] + w->skin;
+        s.i = i, s.left = i < own_lo;
+        if (!reach_prunes(w, gd, s.ri)) {
+            for (int ix = ix0; ix <= ix1; ix++)
+                for (int iy = iy0; iy <= iy1; iy++) {
+                    const int col = (ix * n1 + iy) * n2;
+                    const int k0 = cell_start[col + z0] > jmin ? cell_start[col + z0] : jmin + 1;
+                    const int k1 = cell_start[col + z1 + 1];
+                    if (k0 < k1 && (n = scan_slots(w, tb, to_list, &s, n, k0, k1, &nc)) < 0)
+                        return -1;
                 }
+            continue;
+        }
+        double gx2[3], gy2[3], gz2[3];
+        axis_gap2(gd, 0, cx, s.xi, gx2), axis_gap2(gd, 1, cy, s.yi, gy2), axis_gap2(gd, 2, cz, s.zi, gz2);
+        for (int ix = ix0; ix <= ix1; ix++)
+            for (int iy = iy0; iy <= iy1; iy++) {
+                const int col = (ix * n1 + iy) * n2;
+                const double dxy2 = gx2[ix - cx + 1] + gy2[iy - cy + 1];
+                int za = z0, zb = z1; /* a middle cell out of reach between two in reach is tested whole */
+                while (za <= zb && !cell_in_reach(w, gd, col + za, dxy2 + gz2[za - cz + 1], s.ri))
+                    za++;
+                while (zb > za && !cell_in_reach(w, gd, col + zb, dxy2 + gz2[zb - cz + 1], s.ri))
+                    zb--;
+                if (za > zb)
+                    continue;
+                const int k0 = cell_start[col + za] > jmin ? cell_start[col + za] : jmin + 1;
+                const int k1 = cell_start[col + zb + 1];
+                if (k0 < k1 && (n = scan_slots(w, tb, to_list, &s, n, k0, k1, &nc)) < 0)
+                    return -1;
             }
     }
     *n_cross += nc;
@@ -462,6 +545,13 @@ int dem_neighbour_rebuild(dem_world *w, cm_error *err)
         }
         g->wall_near[i] = near;
     }
+    /* the grains the walls stage visits until the next rebuild: a grain
+     * with neither a wall near nor a wall spring gains neither before it */
+    int nl = 0;
+    for (int i = 0; i < g->n; i++)
+        if (g->wall_near[i] | g->wall_mask[i])
+            w->wall_list[nl++] = i;
+    w->n_wall_list = nl;
     w->walls_near_valid = 1;
     w->rebuild_count++;
     w->prof.rebuilds++;

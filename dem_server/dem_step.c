@@ -192,6 +192,20 @@ static void wall_flush(dem_world *w, wall_fn kernel, const wall_in *in, wall_bat
     b->n = 0;
 }
 
+/* The first k with a[k] >= v in the ascending a[0 .. n). */
+static int lower_bound(const int *a, int n, int v)
+{
+    int k = 0;
+    while (n > 0) {
+        const int half = n / 2;
+        if (a[k + half] < v)
+            k += half + 1, n -= half + 1;
+        else
+            n = half;
+    }
+    return k;
+}
+
 /* Walls for grain slots [lo, hi), added after gravity; wall forces into wf;
  * returns the contacts. A shaped grain's contacts are computed on the spot
  * (dem_shaped_wall), after the queue is flushed, so that every sum keeps
@@ -225,7 +239,14 @@ static int walls_range(dem_world *w, int lo, int hi, double (*wf)[3], double *re
     wall_batch b;
     b.n = 0;
     int contacts = 0;
-    for (int i = lo; i < hi; i++) {
+    /* the grains of the wall list in [lo, hi) where it is current (a few in
+     * a hundred in a bed: the others have no wall in reach), else all */
+    const int *list = near_valid ? w->wall_list : NULL;
+    int q0 = lo, q1 = hi;
+    if (list)
+        q0 = lower_bound(list, w->n_wall_list, lo), q1 = lower_bound(list, w->n_wall_list, hi);
+    for (int q = q0; q < q1; q++) {
+        const int i = list ? list[q] : q;
         uint32_t mask = g->wall_mask[i];
         /* the walls within reach (and any still holding a spring), in
          * ascending order as the loop over all walls would take them */

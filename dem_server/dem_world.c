@@ -9,6 +9,7 @@
 #include <float.h>
 #include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -132,6 +133,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
     g->wall_mask = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
     g->wall_near = xcalloc((size_t)cap, sizeof(uint32_t), &bad);
+    w->wall_list = xcalloc((size_t)cap, sizeof(int), &bad);
     g->id = xcalloc((size_t)cap, sizeof(int), &bad);
     g->slot_of = xcalloc((size_t)cap, sizeof(int), &bad);
     g->tag = xcalloc((size_t)cap, sizeof(int), &bad);
@@ -152,6 +154,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     pl->slot_lo = pstart ? pstart + 8 * nb1 : NULL;
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
+    w->row_held = xcalloc((size_t)cap, 1, &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)
         w->tb[t].f = xcalloc(6 * (size_t)cap, sizeof(double), &bad);
     if (bad) {
@@ -178,6 +181,7 @@ void dem_world_destroy(dem_world **wp)
     free(g->mat);
     free(g->wall_mask);
     free(g->wall_near);
+    free(w->wall_list);
     free(g->id);
     free(g->slot_of);
     free(g->tag);
@@ -211,7 +215,9 @@ void dem_world_destroy(dem_world **wp)
             free(w->tb[t].f), free(w->tb[t].rows);
     free(w->tb);
     free(w->scratch);
+    free(w->row_held);
     free(w->cell_pos);
+    free(w->cell_rmax);
     dem_surface_free(&w->surf);
     free(w);
     *wp = NULL;
@@ -434,6 +440,45 @@ static inline __attribute__((always_inline)) void permute_rows(void *a, void *tm
         memcpy(s + row * (size_t)i, d + row * (size_t)i, row);
 }
 
+/* 1 if a row of `len` doubles has a bit set (-0.0 counts: moved rows keep
+ * their bits). */
+static inline int row_nonzero(const double *a, size_t len)
+{
+    uint64_t u = 0;
+    for (size_t k = 0; k < len; k++) {
+        uint64_t b;
+        memcpy(&b, a + k, sizeof b);
+        u |= b;
+    }
+    return u != 0;
+}
+
+/* permute_rows for rows of `len` doubles that are mostly zero (the wall and
+ * surface springs: a few grains in a hundred touch a wall or the tire),
+ * by one thread: the rows with a bit set gathered into tmp, then every row
+ * of the result either one of them or zeroed where it is not zero already.
+ * Moved this way, the rows of a re-sort cost a read or two each instead of
+ * two copies (session 27, the paper scene: the ranks' time in memmove 3.5
+ * -> 1.9 %). held: n bytes of work space. */
+static void permute_sparse_rows(double *a, double *tmp, unsigned char *held, size_t len, const int *order, int n)
+{
+    size_t k = 0;
+    for (int i = 0; i < n; i++) {
+        const double *src = a + len * (size_t)order[i];
+        held[i] = (unsigned char)row_nonzero(src, len);
+        if (held[i])
+            memcpy(tmp + len * k++, src, len * sizeof *a);
+    }
+    k = 0;
+    for (int i = 0; i < n; i++) {
+        double *dst = a + len * (size_t)i;
+        if (held[i])
+            memcpy(dst, tmp + len * k++, len * sizeof *a);
+        else if (row_nonzero(dst, len))
+            memset(dst, 0, len * sizeof *a);
+    }
+}
+
 /* Moves grain data so that slot k holds the grain previously in order[k]
  * (over the world's threads when there are many grains). */
 void dem_grains_permute(dem_world *w, const int *order)
@@ -458,9 +503,14 @@ void dem_grains_permute(dem_world *w, const int *order)
         permute_rows(g->q, tmp, 4 * sizeof(double), order, n);
         permute_rows(g->inertia, tmp, 3 * sizeof(double), order, n);
         permute_rows(g->angmom, tmp, 3 * sizeof(double), order, n);
-        permute_rows(g->wall_hist, tmp, wh * sizeof(double), order, n);
-        if (w->surf)
-            permute_rows(w->surf->hist, tmp, sh * sizeof(double), order, n);
+#ifdef _OPENMP
+#pragma omp single
+#endif
+        {
+            permute_sparse_rows(g->wall_hist, tmp, w->row_held, wh, order, n);
+            if (w->surf)
+                permute_sparse_rows(w->surf->hist, tmp, w->row_held, sh, order, n);
+        }
 #ifdef _OPENMP
 #pragma omp for schedule(static)
 #endif

@@ -197,6 +197,8 @@ struct dem_world {
     int *pi, *pj;
     dem_pair_plan plan; /* how the threads share the pairs (dem_pairs.c) */
     int walls_near_valid; /* g.wall_near is current (0 after grains or walls changed: every wall is tested) */
+    int *wall_list;       /* cap: the slots with a wall near or a wall spring at the last rebuild, ascending */
+    int n_wall_list;      /* (with walls_near_valid: no other grain can touch a wall until the next one) */
     dem_hash hist[2];   /* pair key -> row of hist_val, current and previous list */
     double *hist_val[2]; /* springs, hist_stride per pair, in list order */
     int hist_stride;    /* DEM_HIST_TANGENTIAL, or DEM_HIST_MAX with the rolling spring */
@@ -215,6 +217,7 @@ struct dem_world {
     /* cell grid */
     int *cell_start, *cell_items, cell_cap;
     int *grain_cell;
+    double *cell_rmax;  /* cell_cap: the largest radius in each cell (0 empty), the searches' reach */
     long rebuild_count;
 
     dem_surface *surf;
@@ -228,6 +231,7 @@ struct dem_world {
     int n_threads;
     dem_thread_buf *tb; /* n_threads entries */
     double *scratch;    /* DEM_SCRATCH_PER_GRAIN * cap: re-sorting without allocation */
+    unsigned char *row_held; /* cap: re-sorting the sparse history rows (dem_grains_permute) */
     int *cell_pos;      /* cell_cap: counting-sort cursor */
 
     int next_tag;       /* tag of the next grain added */

@@ -260,14 +260,17 @@ static int same_bits_two_materials_differ_spring(void) { return two_materials_di
  * (cells of several grains, grains on cell and grid edges), searched with
  * the grains sorted by cell (the column ranges of dem_grid.c) and unsorted
  * (the 27-cell walk), on 1 and 2 threads: every pair within r_i + r_j +
- * skin once, no other, rows in ascending i. */
+ * skin once, no other, rows in ascending i (sorted: partners in ascending
+ * slots, the walk's order). The sizes mixed, or in layers (coarse at the
+ * bottom, fine on top: the cells of fine grains only, which the search
+ * leaves out where they are beyond a fine grain's reach, dem_grid.c). */
 static int cmp_u64(const void *a, const void *b)
 {
     uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
     return (x > y) - (x < y);
 }
 
-static int neighbour_list_brute_force(void)
+static int neighbour_list_brute_force_of(int layered)
 {
     enum { N = 6000 };
     static double pos[N][3], rad[N];
@@ -277,7 +280,8 @@ static int neighbour_list_brute_force(void)
             seed = seed * 1664525u + 1013904223u;
             pos[i][a] = 0.06 * (double)(seed >> 8) / 16777216.0 * (a == 2 ? 0.5 : 1.0);
         }
-        rad[i] = i % 3 == 0 ? 1.5e-3 : (i % 3 == 1 ? 1.0e-3 : 0.6e-3);
+        const int size = layered ? (pos[i][2] < 0.01 ? 0 : pos[i][2] < 0.02 ? 1 : 2) : i % 3;
+        rad[i] = size == 0 ? 1.5e-3 : (size == 1 ? 1.0e-3 : 0.6e-3);
     }
     dem_material m = test_material(5e7, 0.3, 0.5, 0.4);
     uint64_t *want = malloc((size_t)N * 64 * sizeof *want), *got = malloc((size_t)N * 64 * sizeof *got);
@@ -312,11 +316,12 @@ static int neighbour_list_brute_force(void)
             got[p] = ti < tj ? (uint64_t)ti << 32 | (uint64_t)tj : (uint64_t)tj << 32 | (uint64_t)ti;
             ENSURE(p == 0 || w->pi[p] >= w->pi[p - 1]);
             ENSURE(w->pj[p] > w->pi[p]);
+            ENSURE(!sorted || p == 0 || w->pi[p] > w->pi[p - 1] || w->pj[p] > w->pj[p - 1]);
         }
         qsort(got, (size_t)nw, sizeof *got, cmp_u64);
         ENSURE(memcmp(got, want, (size_t)nw * sizeof *got) == 0);
-        printf("%s, %d thread%s: %ld pairs as brute force\n", sorted ? "sorted" : "unsorted", threads,
-               threads > 1 ? "s" : "", nw);
+        printf("%s, %s, %d thread%s: %ld pairs as brute force\n", layered ? "layered" : "mixed",
+               sorted ? "sorted" : "unsorted", threads, threads > 1 ? "s" : "", nw);
         dem_world_destroy(&w);
     }
     free(want);
@@ -324,7 +329,11 @@ static int neighbour_list_brute_force(void)
     return 0;
 }
 
+static int neighbour_list_brute_force(void) { return neighbour_list_brute_force_of(0); }
+static int neighbour_list_brute_force_layered(void) { return neighbour_list_brute_force_of(1); }
+
 static const test_case tests[] = {{"neighbour_list_brute_force", neighbour_list_brute_force},
+                                  {"neighbour_list_brute_force_layered", neighbour_list_brute_force_layered},
                                   {"same_bits_two_materials", same_bits_two_materials},
                                   {"same_bits_two_materials_differ", same_bits_two_materials_differ},
                                   {"same_bits_two_materials_differ_spring", same_bits_two_materials_differ_spring},

@@ -154,7 +154,7 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     pl->slot_lo = pstart ? pstart + 8 * nb1 : NULL;
     w->tb = xcalloc((size_t)w->n_threads, sizeof *w->tb, &bad);
     w->scratch = xcalloc((size_t)cap * DEM_SCRATCH_PER_GRAIN, sizeof(double), &bad);
-    w->row_held = xcalloc((size_t)cap, 1, &bad);
+    w->sparse_held = xcalloc((size_t)cap, 1, &bad);
     for (int t = 1; t < w->n_threads && !bad; t++)
         w->tb[t].f = xcalloc(6 * (size_t)cap, sizeof(double), &bad);
     if (bad) {
@@ -215,7 +215,7 @@ void dem_world_destroy(dem_world **wp)
             free(w->tb[t].f), free(w->tb[t].rows);
     free(w->tb);
     free(w->scratch);
-    free(w->row_held);
+    free(w->sparse_held);
     free(w->cell_pos);
     free(w->cell_rmax);
     dem_surface_free(&w->surf);
@@ -507,9 +507,9 @@ void dem_grains_permute(dem_world *w, const int *order)
 #pragma omp single
 #endif
         {
-            permute_sparse_rows(g->wall_hist, tmp, w->row_held, wh, order, n);
+            permute_sparse_rows(g->wall_hist, tmp, w->sparse_held, wh, order, n);
             if (w->surf)
-                permute_sparse_rows(w->surf->hist, tmp, w->row_held, sh, order, n);
+                permute_sparse_rows(w->surf->hist, tmp, w->sparse_held, sh, order, n);
         }
 #ifdef _OPENMP
 #pragma omp for schedule(static)

@@ -231,7 +231,7 @@ struct dem_world {
     int n_threads;
     dem_thread_buf *tb; /* n_threads entries */
     double *scratch;    /* DEM_SCRATCH_PER_GRAIN * cap: re-sorting without allocation */
-    unsigned char *row_held; /* cap: re-sorting the sparse history rows (dem_grains_permute) */
+    unsigned char *sparse_held; /* cap: re-sorting the sparse history rows (dem_grains_permute) */
     int *cell_pos;      /* cell_cap: counting-sort cursor */
 
     int next_tag;       /* tag of the next grain added */

@@ -3,17 +3,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* splitmix64 finaliser: spreads consecutive ids over the table */
-static inline uint64_t mix(uint64_t k)
-{
-    k ^= k >> 30;
-    k *= 0xbf58476d1ce4e5b9ULL;
-    k ^= k >> 27;
-    k *= 0x94d049bb133111ebULL;
-    k ^= k >> 31;
-    return k;
-}
-
 int dem_hash_cap_for(long n)
 {
     int want = 16;
@@ -51,7 +40,7 @@ void dem_hash_free(dem_hash *h)
 int dem_hash_insert(dem_hash *h, uint64_t key)
 {
     uint32_t m = (uint32_t)h->cap - 1;
-    uint32_t s = (uint32_t)mix(key) & m;
+    uint32_t s = (uint32_t)dem_hash_mix(key) & m;
     while (h->key[s] != DEM_HASH_EMPTY) {
         if (h->key[s] == key)
             return (int)s;
@@ -68,7 +57,7 @@ int dem_hash_find(const dem_hash *h, uint64_t key)
     if (h->cap == 0)
         return -1;
     uint32_t m = (uint32_t)h->cap - 1;
-    uint32_t s = (uint32_t)mix(key) & m;
+    uint32_t s = (uint32_t)dem_hash_mix(key) & m;
     while (h->key[s] != DEM_HASH_EMPTY) {
         if (h->key[s] == key)
             return (int)s;

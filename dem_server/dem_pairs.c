@@ -565,11 +565,22 @@ __attribute__((target("avx2"))) static int fill_avx2(const pair_arrays *a, pair_
     const int *restrict pi = a->pi, *restrict pj = a->pj, *restrict mat = a->mat;
     const double *restrict x = a->x, *restrict y = a->y, *restrict z = a->z, *restrict r = a->r;
     unsigned char *restrict held = a->held;
+    const double *restrict hist = a->hist;
     const __m128i c_one = _mm_set1_epi32(a->one_c), nmat = _mm_set1_epi32(DEM_MAX_MATERIALS);
     const __m128i lane = _mm_setr_epi32(0, 1, 2, 3);
     const __m256d zero = _mm256_setzero_pd();
     int n = b->n;
     for (; p + 4 <= pe && n <= BATCH - 4; p += 4) {
+        /* The four pairs' spring rows (hs * 32 bytes) asked for now: the
+         * kernel reads those in contact once the batch is full. The rows
+         * stream through once per step (~48 bytes a candidate with the
+         * rolling spring, megabytes a rank), and the kernel's lane-by-lane
+         * loads of them were ~23 % of its time (perf, bench_dem stirred);
+         * the hardware does not see them coming. Asked for here, the paper
+         * scene's pair stage ran ~1.09x as fast, the same bits (session 28). */
+        const char *hrow = (const char *)(hist + (size_t)hs * p);
+        for (int o = 0; o < hs * 32; o += 64)
+            __builtin_prefetch(hrow + o);
         const __m128i vi = _mm_loadu_si128((const __m128i *)(pi + p)), vj = _mm_loadu_si128((const __m128i *)(pj + p));
         const int i0 = pi[p], i1 = pi[p + 1], i2 = pi[p + 2], i3 = pi[p + 3];
         const int j0 = pj[p], j1 = pj[p + 1], j2 = pj[p + 2], j3 = pj[p + 3];
@@ -640,6 +651,7 @@ static inline __attribute__((always_inline)) int fill(const pair_arrays *a, pair
     const int one_c = a->one_c;
     int n = b->n;
     for (; p < pe && n < BATCH; p++) {
+        __builtin_prefetch(a->hist + (size_t)hs * p); /* its spring row, as fill_avx2 does */
         const int i = pi[p], j = pj[p];
         const double ex = x[i] - x[j], ey = y[i] - y[j], ez = z[i] - z[j];
         const double d2 = ex * ex + ey * ey + ez * ez, rs = r[i] + r[j];

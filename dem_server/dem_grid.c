@@ -202,7 +202,7 @@ static inline uint64_t pair_key_at(const spring_carry *c, int p)
 static inline void carry_spring(const spring_carry *c, int p)
 {
     const int hs = c->hs, ti = c->tag[c->pi[p]], tj = c->tag[c->pj[p]];
-    const uint64_t key = pair_key_at(c, p);
+    const uint64_t key = dem_pair_key(ti, tj);
     int o = dem_hash_find(c->old, key), flip = 0;
     double *xi = c->nval + (size_t)hs * p;
     if (o >= 0) {

@@ -369,6 +369,73 @@ static int frozen_grains(void)
     return 0;
 }
 
+/* Frozen soil in runs of whole chunks of slots (the integration skips a
+ * chunk of frozen grains only, dem_step.c): a cloud of 1200 grains apart,
+ * falling and spinning, the 800 at x < 0.8 m frozen. The slots are in cell
+ * order (x the slowest axis), so the frozen ones fill runs longer than a
+ * chunk (256) and the cut falls inside one. The frozen grains keep every
+ * bit; the live ones, whatever chunk they share with frozen ones, fall and
+ * turn as the closed forms of the scheme say: v_n = n g dt, z_n = z_0 + g
+ * dt^2 n (n + 1) / 2, and each step turns q by 2 atan(|w| dt / 2) about w
+ * (q_w = cos(n atan(|w| dt / 2)) from q = 1). */
+static int frozen_chunks(void)
+{
+    dem_material m = test_material(5e7, 0.3, 0.5, 0.5);
+    const double g[3] = {0, 0, -9.81}, dt = 5e-5, w_spin = 30.0;
+    dem_world *w = test_world(&m, 1, dt, 1200, g, 1);
+    ENSURE(w);
+    cm_error err = {0};
+    enum { NX = 48, NY = 5, NZ = 5, STEPS = 400 };
+    for (int ix = 0; ix < NX; ix++) /* x in [0.01, 1.19] m, 25 mm apart, r 5 mm: no contacts */
+        for (int iy = 0; iy < NY; iy++)
+            for (int iz = 0; iz < NZ; iz++) {
+                const double p[3] = {0.01 + 0.025 * ix, 0.025 * iy, 1.0 + 0.025 * iz}, v[3] = {0, 0, 0},
+                             om[3] = {0, 0, w_spin};
+                int id;
+                ENSURE(dem_grain_add(w, p, 0.005, 0, &id, &err) == 0);
+                ENSURE(dem_grain_set(w, id, p, v, om) == 0);
+            }
+    const int n = dem_grain_count(w);
+    ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg); /* the first rebuild sorts the slots */
+    ENSURE(dem_freeze_outside_x(w, 0.8, INFINITY) == 32 * NY * NZ);
+    int run = 0, longest = 0;
+    for (int i = 0; i < n; i++) {
+        run = w->g.frozen[i] ? run + 1 : 0;
+        longest = run > longest ? run : longest;
+    }
+    ENSURE_MSG(longest >= 2 * 256, "longest run of frozen slots %d", longest);
+    dem_grain_state *b = malloc(sizeof *b * (size_t)n);
+    ENSURE(b);
+    for (int id = 0; id < n; id++)
+        dem_grain_get(w, id, &b[id]);
+    const long rebuilds0 = w->rebuild_count;
+    for (int s = 0; s < STEPS; s++)
+        ENSURE(dem_step(w, &err) == 0);
+    ENSURE_MSG(w->rebuild_count > rebuilds0, "the live grains' displacement asked for no rebuild");
+    const double half = atan(0.5 * w_spin * dt); /* half the turn of one step */
+    for (int id = 0; id < n; id++) {
+        dem_grain_state a;
+        dem_grain_get(w, id, &a);
+        if (b[id].x[0] < 0.8) {
+            ENSURE_MSG(memcmp(a.x, b[id].x, sizeof a.x) == 0 && memcmp(a.v, b[id].v, sizeof a.v) == 0 &&
+                           memcmp(a.w, b[id].w, sizeof a.w) == 0 && memcmp(a.q, b[id].q, sizeof a.q) == 0,
+                       "frozen grain %d moved", id);
+            continue;
+        }
+        const double k = STEPS, vz = b[id].v[2] + k * g[2] * dt,
+                     z = b[id].x[2] + b[id].v[2] * k * dt + g[2] * dt * dt * k * (k + 1) / 2;
+        ENSURE_MSG(fabs(a.v[2] - vz) < 1e-12 && fabs(a.x[2] - z) < 1e-12 && a.x[0] == b[id].x[0],
+                   "live grain %d: vz %.17g (closed form %.17g), z %.17g (%.17g)", id, a.v[2], vz, a.x[2], z);
+        /* b's orientation after the first step: cos(atan(..)), the live grains turn on from it */
+        ENSURE_MSG(fabs(a.q[0] - cos((k + 1) * half)) < 1e-12 && fabs(a.q[3] - sin((k + 1) * half)) < 1e-12,
+                   "live grain %d: q (%.17g, %.17g), closed form (%.17g, %.17g)", id, a.q[0], a.q[3],
+                   cos((k + 1) * half), sin((k + 1) * half));
+    }
+    free(b);
+    dem_world_destroy(&w);
+    return 0;
+}
+
 /* ---- a rigid wheel through the window vs a long bed ------------------ */
 
 #define CYL_NT 40 /* segments around */
@@ -738,6 +805,7 @@ static const test_case tests[] = {
     {"add_copies", add_copies},
     {"wall_moves", wall_moves},
     {"frozen_grains", frozen_grains},
+    {"frozen_chunks", frozen_chunks},
     {"freeze_extents", freeze_extents},
     {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},

@@ -129,11 +129,18 @@ static int stage_send(coupled *c, const dem_coupled_def *def, int finish, double
     out->kind = finish ? IPC_FRAME_FINISH : IPC_FRAME_DATA;
     out->time = time;
     if (!finish) {
-        double inv = 1.0 / k_steps, interval = def->dt * k_steps;
+        const double inv = 1.0 / k_steps, interval = def->dt * k_steps, *f_sum = c->f_sum, *v = c->v;
+        /* summed in a local: the frame p might alias c->w_dem for all the
+         * compiler knows, and the sum went through memory at every node
+         * (~1.5 % of rank 0's time in the paper scene, perf); the same adds
+         * in the same order */
+        double w_dem = c->w_dem;
         for (size_t q = 0; q < m; q++) {
-            p[q] = c->f_sum[q] * inv;
-            c->w_dem += p[q] * c->v[q] * interval; /* power of the forces on the moving surface */
+            const double fq = f_sum[q] * inv;
+            p[q] = fq;
+            w_dem += fq * v[q] * interval; /* power of the forces on the moving surface */
         }
+        c->w_dem = w_dem;
         for (int a = 0; a < 3; a++) {
             out->info[IPC_INFO_FORCE_X + a] = acc->force[a] * inv;
             out->info[IPC_INFO_MOMENT_X + a] = acc->moment[a] * inv;

@@ -120,18 +120,14 @@ int dem_world_create(const dem_world_def *def, int n_materials, const dem_materi
     const size_t n_dbl = sizeof dbl / sizeof dbl[0];
     const size_t stride = ((size_t)cap * sizeof(double) + 4095) / 4096 * 4096 + 192;
     _Static_assert(sizeof dbl / sizeof dbl[0] * 192 <= 4096, "the stagger of the grain arrays fits in a page");
-    const size_t block_bytes = (n_dbl * stride + 4095) / 4096 * 4096; /* C17: a multiple of the alignment */
-    g->block = aligned_alloc(4096, block_bytes);
-    g->block_spare = aligned_alloc(4096, block_bytes);
-    if (!g->block || !g->block_spare)
+    g->block = aligned_alloc(4096, (n_dbl * stride + 4095) / 4096 * 4096); /* C17: a multiple of the alignment */
+    if (!g->block)
         bad = 1;
     else
         for (size_t k = 0; k < n_dbl; k++) {
             *dbl[k] = (double *)((char *)g->block + k * stride);
             memset(*dbl[k], 0, (size_t)cap * sizeof(double));
         }
-    if (g->block_spare)
-        memset(g->block_spare, 0, block_bytes);
     g->q = xcalloc(4 * (size_t)cap, sizeof(double), &bad);
     g->wall_hist = xcalloc((size_t)cap * DEM_MAX_WALLS * w->hist_stride, sizeof(double), &bad);
     g->mat = xcalloc((size_t)cap, sizeof(int), &bad);
@@ -180,7 +176,6 @@ void dem_world_destroy(dem_world **wp)
         w->dist->release(w);
     dem_grains *g = &w->g;
     free(g->block); /* x .. z0 */
-    free(g->block_spare);
     free(g->q);
     free(g->wall_hist);
     free(g->mat);
@@ -484,47 +479,23 @@ static void permute_sparse_rows(double *a, double *tmp, unsigned char *held, siz
     }
 }
 
-/* Rows of `row` bytes: dst[k] <- src[order[k]], this thread's share of k
- * (as permute_rows, without the copy back). */
-static inline __attribute__((always_inline)) void gather_rows(void *dst, const void *src, const size_t row,
-                                                              const int *order, int n)
-{
-    char *d = dst;
-    const char *s = src;
-#ifdef _OPENMP
-#pragma omp for schedule(static)
-#endif
-    for (int i = 0; i < n; i++)
-        memcpy(d + row * (size_t)i, s + row * (size_t)order[i], row);
-}
-
 /* Moves grain data so that slot k holds the grain previously in order[k]
- * (over the world's threads when there are many grains). The hot doubles
- * (x .. z0, one block) are gathered into the spare block, which then takes
- * the block's place: one pass over them instead of a gather and a copy back
- * (the copy was ~2 % of a rank's time in the paper scene, perf). The slots
- * past n hold whatever the spare held, as they held stale rows before. */
+ * (over the world's threads when there are many grains). */
 void dem_grains_permute(dem_world *w, const int *order)
 {
     dem_grains *g = &w->g;
     const int n = g->n;
     double *tmp = w->scratch; /* cap * DEM_SCRATCH_PER_GRAIN doubles: no allocation in the loop */
-    /* in the block, in dem_world_create's order */
-    double **blk[] = {&g->x,  &g->y,  &g->z,  &g->vx, &g->vy,    &g->vz,    &g->wx, &g->wy, &g->wz, &g->fx, &g->fy,
-                      &g->fz, &g->tx, &g->ty, &g->tz, &g->r,     &g->inv_m, &g->inv_i, &g->x0, &g->y0, &g->z0};
-    enum { N_BLK = sizeof blk / sizeof blk[0] };
-    double *moved[N_BLK]; /* each array's place in the spare block */
-    for (int k = 0; k < N_BLK; k++)
-        moved[k] = (double *)((char *)g->block_spare + ((char *)*blk[k] - (char *)g->block));
+    double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
+                     g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
     int *ints[] = {g->mat, g->id, g->surf_count, g->shape, g->tag};
     const size_t wh = (size_t)w->wall_stride * w->hist_stride, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
 #ifdef _OPENMP
 #pragma omp parallel num_threads(w->n_threads) if (w->n_threads > 1 && n >= 4096)
 #endif
     {
-        for (int k = 0; k < N_BLK; k++)
-            gather_rows(moved[k], *blk[k], sizeof(double), order, n);
-        permute_rows(g->sc, tmp, sizeof(double), order, n);
+        for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+            permute_rows(dbl[k], tmp, sizeof(double), order, n);
         for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++)
             permute_rows(ints[k], tmp, sizeof(int), order, n);
         permute_rows(g->wall_mask, tmp, sizeof *g->wall_mask, order, n);
@@ -546,10 +517,6 @@ void dem_grains_permute(dem_world *w, const int *order)
         for (int i = 0; i < n; i++)
             g->slot_of[g->id[i]] = i;
     }
-    for (int k = 0; k < N_BLK; k++)
-        *blk[k] = moved[k];
-    void *b = g->block;
-    g->block = g->block_spare, g->block_spare = b;
 }
 
 /* ---- removing and adding grains ---------------------------------------- */

@@ -73,7 +73,6 @@ typedef struct dem_grains {
     double *r, *inv_m, *inv_i;
     int *mat;
     void *block;       /* the doubles x .. z0 live in it, staggered (dem_world_create) */
-    void *block_spare; /* the same layout: a re-sort gathers into it, then the two swap */
     /* cold */
     double *q;         /* 4 per grain (w, x, y, z) */
     int *id;           /* id of the grain in slot i (dense: 0 .. n-1, renumbered on removal) */

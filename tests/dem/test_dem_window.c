@@ -427,9 +427,9 @@ static int frozen_chunks(void)
         ENSURE_MSG(fabs(a.v[2] - vz) < 1e-12 && fabs(a.x[2] - z) < 1e-12 && a.x[0] == b[id].x[0],
                    "live grain %d: vz %.17g (closed form %.17g), z %.17g (%.17g)", id, a.v[2], vz, a.x[2], z);
         /* b's orientation after the first step: cos(atan(..)), the live grains turn on from it */
-        ENSURE_MSG(fabs(a.q[0] - cos((k + 1) * half)) < 1e-12 && fabs(a.q[3] - sin((k + 1) * half)) < 1e-12,
-                   "live grain %d: q (%.17g, %.17g), closed form (%.17g, %.17g)", id, a.q[0], a.q[3],
-                   cos((k + 1) * half), sin((k + 1) * half));
+        const double qw = cos((k + 1) * half), qz = sin((k + 1) * half);
+        ENSURE_MSG(fabs(a.q[0] - qw) < 1e-12 && fabs(a.q[3] - qz) < 1e-12,
+                   "live grain %d: q (%.17g, %.17g), closed form (%.17g, %.17g)", id, a.q[0], a.q[3], qw, qz);
     }
     free(b);
     dem_world_destroy(&w);

@@ -340,6 +340,10 @@ typedef struct dem_stats {
 } dem_stats;
 
 void dem_world_stats(const dem_world *w, dem_stats *s);
+/* dem_world_stats without the energies (e_elastic and pe_grav left zero):
+ * what a health check reads, the overlaps and the kinetic energies, without
+ * a Hertz energy (a power 5/2) for every contact. */
+void dem_world_stats_lean(const dem_world *w, dem_stats *s);
 /* Adds to the profile's idle time (the coupled loop's waits outside the step):
  * seconds of wall time, cpu_seconds of the calling thread's CPU time in them. */
 void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds);

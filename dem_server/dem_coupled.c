@@ -34,6 +34,21 @@
 #include "log.h"
 #include "timer.h"
 
+/* The frame from fem_server as the loop reads it: on rank 0 from the ring,
+ * on the other ranks from rank 0 (stage surf_bcast). */
+typedef struct reply {
+    double kind, flags, wheel_x, stop_requested;
+    double window, freeze_lo, freeze_hi; /* distributed: what the window does (dem_window_pending) */
+} reply;
+
+/* The reply and the surface's positions and velocities after it, in one
+ * block: distributed, one broadcast takes it all to the other ranks (they
+ * wait in it at every exchange; three in a row took three latencies). */
+typedef struct reply_msg {
+    reply in;
+    double xv[]; /* 3 nn positions, then 3 nn velocities */
+} reply_msg;
+
 typedef struct coupled {
     dem_world *w;
     const dem_coupled_def *def;
@@ -41,6 +56,7 @@ typedef struct coupled {
     int root;        /* talks to fem_server */
     uint32_t nn;
     int *tris;
+    reply_msg *msg;  /* x and v are its xv */
     double *f_sum, *x, *v, *x_sub, *mass;
     double w_dem; /* J, interface work seen by the DEM */
     /* the exchange in progress, for stage send (surface_ready) */
@@ -57,8 +73,7 @@ static void coupled_free(coupled *c)
     free(c->tris);
     free(c->mass);
     free(c->f_sum);
-    free(c->x);
-    free(c->v);
+    free(c->msg);
     free(c->x_sub);
 }
 
@@ -79,7 +94,7 @@ static int move_surface(coupled *c, double tau, cm_error *err)
 static int check_health(dem_world *w, const dem_coupled_def *def, cm_error *err)
 {
     dem_stats s;
-    dem_world_stats(w, &s);
+    dem_world_stats_lean(w, &s);
     if (!isfinite(s.ke_trans) || !isfinite(s.ke_rot))
         return cm_fail(err, CM_ERR_NUMERIC, "grain velocities are no longer finite at t = %.4f s (step %ld): the "
                        "integration is unstable; reduce coupling.dt", s.time, s.step);
@@ -238,13 +253,6 @@ int dem_coupled_attach(const dem_coupled_def *def, ipc_channel **ch, cm_error *e
     return CM_OK;
 }
 
-/* The frame from fem_server as the loop reads it: on rank 0 from the ring,
- * on the other ranks from rank 0 (stage surf_bcast). */
-typedef struct reply {
-    double kind, flags, wheel_x, stop_requested;
-    double window, freeze_lo, freeze_hi; /* distributed: what the window does (dem_window_pending) */
-} reply;
-
 /* The terrain window after an exchange. Distributed, rank 0 alone holds the
  * window and said what it does: freezing is done by every rank on its own
  * grains (the rebuild flag agreed), a shift (removal, appended stretch) on
@@ -306,11 +314,13 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
     size_t m = 3 * (size_t)c.nn;
     c.tris = malloc(3 * (size_t)nt * sizeof *c.tris);
     c.f_sum = calloc(m, sizeof *c.f_sum);
-    c.x = malloc(m * sizeof *c.x);
-    c.v = calloc(m, sizeof *c.v);
+    const size_t msg_bytes = sizeof(reply_msg) + 2 * m * sizeof(double);
+    c.msg = calloc(1, msg_bytes); /* v zero until the first reply */
     c.x_sub = malloc(m * sizeof *c.x_sub);
     c.mass = malloc(c.nn * sizeof *c.mass);
-    if (!c.tris || !c.f_sum || !c.x || !c.v || !c.x_sub || !c.mass) {
+    if (c.msg)
+        c.x = c.msg->xv, c.v = c.msg->xv + m;
+    if (!c.tris || !c.f_sum || !c.msg || !c.x_sub || !c.mass) {
         rc = cm_fail(err, CM_ERR_NOMEM, "out of memory for a surface of %u nodes", c.nn);
         goto done;
     }
@@ -402,19 +412,20 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         lap(&t_lap, &prof.grains);
         prof.surface -= send1 - send0, prof.grains -= c.send_s - send1, prof.send += c.send_s - send0;
 
-        reply in = {0};
+        reply *const in = &c.msg->in;
+        memset(in, 0, sizeof *in);
         const double idle0 = prof.wait + prof.bcast, cpu0 = dist ? cm_thread_cpu_now() : 0.0;
         if (root) {
             const ipc_frame_head *head;
             const double *q;
             if ((ipc_rc = ipc_recv(c.ch, &head, &q)))
                 break;
-            in.kind = head->kind, in.flags = head->flags, in.wheel_x = head->info[IPC_INFO_CENTER_X];
+            in->kind = head->kind, in->flags = head->flags, in->wheel_x = head->info[IPC_INFO_CENTER_X];
             /* After our own request the run ends whether or not the peer
              * checkpointed (a FEM side without checkpoints ignores it). */
-            in.stop_requested = stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
-            if (dist && def->window && head->kind == IPC_FRAME_DATA && isfinite(in.wheel_x))
-                in.window = dem_window_pending(def->window, in.wheel_x, &in.freeze_lo, &in.freeze_hi);
+            in->stop_requested = stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
+            if (dist && def->window && head->kind == IPC_FRAME_DATA && isfinite(in->wheel_x))
+                in->window = dem_window_pending(def->window, in->wheel_x, &in->freeze_lo, &in->freeze_hi);
             if (head->kind == IPC_FRAME_DATA) {
                 memcpy(c.x, q, m * sizeof *c.x);
                 memcpy(c.v, q + m, m * sizeof *c.v);
@@ -422,18 +433,17 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             ipc_recv_release(c.ch);
         }
         lap(&t_lap, &prof.wait);
-        /* stage "surf_bcast": what rank 0 received, to every rank */
-        if (dist && ((rc = dist->bcast(&in, sizeof in, dist->user, err)) ||
-                     (in.kind == IPC_FRAME_DATA && ((rc = dist->bcast(c.x, m * sizeof *c.x, dist->user, err)) ||
-                                                    (rc = dist->bcast(c.v, m * sizeof *c.v, dist->user, err))))))
+        /* stage "surf_bcast": what rank 0 received, to every rank (the
+         * surface whatever the frame: a finishing one leaves it unread) */
+        if (dist && (rc = dist->bcast(c.msg, msg_bytes, dist->user, err)))
             goto done;
         if (dist)
-            prof.bcast_bytes += (double)(sizeof in + (in.kind == IPC_FRAME_DATA ? 2 * m * sizeof *c.x : 0));
+            prof.bcast_bytes += (double)msg_bytes;
         lap(&t_lap, &prof.bcast);
         /* what the time balance leaves out (dem_mpi.c) */
         dem_world_add_idle(w, prof.wait + prof.bcast - idle0, dist ? cm_thread_cpu_now() - cpu0 : 0.0);
-        const uint32_t kind = (uint32_t)in.kind, flags = (uint32_t)in.flags;
-        stop_requested = in.stop_requested != 0.0;
+        const uint32_t kind = (uint32_t)in->kind, flags = (uint32_t)in->flags;
+        stop_requested = in->stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)
             break;
         if (!(kind == IPC_FRAME_DATA)) {
@@ -444,7 +454,7 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
             goto done;
         time += interval;
         /* between two steps: grains at x(t), the next force sum starts after */
-        if ((rc = window_update(&c, def, &in, err)))
+        if ((rc = window_update(&c, def, in, err)))
             goto done;
         lap(&t_lap, &prof.update);
 

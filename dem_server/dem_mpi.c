@@ -196,8 +196,14 @@ int dem_mpi_slabs(const long *count, int n_cols, int ranks, int *bounds, cm_erro
 }
 
 /* The time balance (LAMMPS' "fix balance ... weight time" in spirit): one
- * of this rank's grains weighs its busy seconds per grain-step since the
- * previous rebuild, averaged over rebuilds, relative to the slowest rank's.
+ * of this rank's grains weighs its busy seconds per grain-step between the
+ * previous rebuild and this one, averaged over rebuilds, relative to the
+ * slowest rank's. The rebuild itself is left out: the ranks wait for each
+ * other at every step's halo, and the steps are what the balance can even
+ * out. In a rebuild fem_server is idle and rank 0 waits for the others
+ * whatever the split; counted in, the rebuild gave rank 0 more grains than
+ * its core could step beside fem_server, and the other ranks waited for it
+ * at every halo (session 32).
  * Busy is the clock minus the CPU time spent in the waits for the others
  * (halo, the rebuild's migration and agreements, the surface gather) and,
  * coupled, for fem_server or rank 0's reply (dem_profile.wait_cpu): a wait
@@ -480,6 +486,8 @@ static int dist_rebuild(dem_world *w, cm_error *err)
         if (c > d->vcap[w->hist_cur])
             d->vcap[w->hist_cur] = c;
     }
+    /* the time balance's measure starts after the rebuild (grain_weight) */
+    d->wall_mark = cm_now(), d->wait_mark = w->prof.wait_cpu, d->steps_mark = w->prof.steps;
     return CM_OK;
 }
 

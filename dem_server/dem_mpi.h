@@ -40,8 +40,9 @@ int dem_mpi_attach(dem_world *w, MPI_Comm comm, cm_error *err);
  *   GRAINS  even grain counts (the default)
  *   TIME    even measured busy time: a grain weighs its rank's busy
  *           seconds (the clock less its waits for the other ranks and,
- *           coupled, for fem_server) per grain-step since the previous
- *           rebuild, relative to the slowest rank's (smoothed over
+ *           coupled, for fem_server) per grain-step over the steps
+ *           since the previous rebuild (the rebuild itself left out),
+ *           relative to the slowest rank's (smoothed over
  *           rebuilds); for ranks that share cores with other work
  *           (fem_server) or that hold the tire's contacts, whose grains
  *           cost more.

@@ -6,6 +6,7 @@
  * grains), dem_bed.c, dem_output.c, dem_config.c, dem_window.c. */
 #include "dem_world.h"
 
+#include <assert.h>
 #include <float.h>
 #include <limits.h>
 #include <math.h>
@@ -420,14 +421,31 @@ int dem_grain_set(dem_world *w, int id, const double x[3], const double v[3], co
     return CM_OK;
 }
 
+/* An ascending order (order_ascends) as runs of consecutive slots: run k
+ * moves r[3k + 2] slots from r[3k + 1] to r[3k]. */
+typedef struct slot_runs {
+    const int *r;
+    int n;
+} slot_runs;
+
 /* Rows of `row` bytes: a[k] <- a[order[k]] through tmp, this thread's share
  * of k (called inside a parallel region, or alone); the worksharing loops'
  * barriers keep tmp whole from one array to the next. Inlined with `row`
- * constant, each row is a plain move. */
+ * constant, each row is a plain move. fw (one thread only): the order
+ * ascends, so each run's source lies at or after its place and is not yet
+ * overwritten: the runs move in place, front to back, once each. */
 static inline __attribute__((always_inline)) void permute_rows(void *a, void *tmp, const size_t row, const int *order,
-                                                               int n)
+                                                               int n, const slot_runs *fw)
 {
     char *s = a, *d = tmp;
+    if (fw) {
+        for (int k = 0; k < fw->n; k++) {
+            const int *r = fw->r + 3 * k;
+            if (r[0] != r[1])
+                memmove(s + row * (size_t)r[0], s + row * (size_t)r[1], row * (size_t)r[2]);
+        }
+        return;
+    }
 #ifdef _OPENMP
 #pragma omp for schedule(static)
 #endif
@@ -453,19 +471,54 @@ static inline int row_nonzero(const double *a, size_t len)
     return u != 0;
 }
 
+/* Whether row i of a sparse history may hold a bit. The wall springs keep
+ * their own record (mask: wall_mask, a wall's bit set while its spring is
+ * non-zero; the walls stage clears a spring when it clears the bit, every
+ * other writer moves or zeroes a row with its mask), so their rows are not
+ * read to be found zero. The surface springs' rows are read (mask NULL):
+ * their counts (surf_count) and rows part where a re-sort runs with the
+ * surface detached (dem_window.c's seam relaxation), which a debug build
+ * of the counts as marks showed. */
+static inline int row_marked(const uint32_t *mask, const double *a, size_t len, int i)
+{
+    return mask ? mask[i] != 0 : row_nonzero(a + len * (size_t)i, len);
+}
+
 /* permute_rows for rows of `len` doubles that are mostly zero (the wall and
  * surface springs: a few grains in a hundred touch a wall or the tire),
- * by one thread: the rows with a bit set gathered into tmp, then every row
- * of the result either one of them or zeroed where it is not zero already.
- * Moved this way, the rows of a re-sort cost a read or two each instead of
- * two copies (session 27, the paper scene: the ranks' time in memmove 3.5
- * -> 1.9 %). held: n bytes of work space. */
-static void permute_sparse_rows(double *a, double *tmp, unsigned char *held, size_t len, const int *order, int n)
+ * by one thread, before the masks themselves move: the marked rows
+ * gathered into tmp, then every row of the result either one of them or
+ * zeroed where its old row was marked. Moved this way, the rows of a
+ * re-sort cost a read or two each instead of two copies (session 27, the
+ * paper scene: the ranks' time in memmove 3.5 -> 1.9 %); the wall rows are
+ * not even read unless their mask is set (session 32). A debug build
+ * checks that every unmarked wall row it passes over is zero. held: n bytes
+ * of work space. forward: in place, front to back, as permute_rows. */
+static void permute_sparse_rows(double *a, double *tmp, unsigned char *held, size_t len, const int *order, int n,
+                                const uint32_t *mask, int forward)
 {
+    if (forward) {
+        for (int i = 0; i < n; i++) {
+            const int o = order[i];
+            if (o == i) { /* stays */
+                assert(!mask || mask[o] || !row_nonzero(a + len * (size_t)o, len));
+                continue;
+            }
+            const int marked = row_marked(mask, a, len, o);
+            assert(marked || !row_nonzero(a + len * (size_t)o, len));
+            double *dst = a + len * (size_t)i;
+            if (marked)
+                memcpy(dst, a + len * (size_t)o, len * sizeof *a);
+            else if (row_marked(mask, a, len, i))
+                memset(dst, 0, len * sizeof *a);
+        }
+        return;
+    }
     size_t k = 0;
     for (int i = 0; i < n; i++) {
         const double *src = a + len * (size_t)order[i];
-        held[i] = (unsigned char)row_nonzero(src, len);
+        held[i] = (unsigned char)row_marked(mask, a, len, order[i]);
+        assert(held[i] || !row_nonzero(src, len));
         if (held[i])
             memcpy(tmp + len * k++, src, len * sizeof *a);
     }
@@ -474,43 +527,74 @@ static void permute_sparse_rows(double *a, double *tmp, unsigned char *held, siz
         double *dst = a + len * (size_t)i;
         if (held[i])
             memcpy(dst, tmp + len * k++, len * sizeof *a);
-        else if (row_nonzero(dst, len))
+        else if (row_marked(mask, a, len, i))
             memset(dst, 0, len * sizeof *a);
     }
 }
 
+/* 1 if order ascends (grains dropped, the others kept in their order): then
+ * order[k] >= k, and the moves can be made in place, front to back. */
+static int order_ascends(const int *order, int n)
+{
+    for (int k = 1; k < n; k++)
+        if (order[k] <= order[k - 1])
+            return 0;
+    return n == 0 || order[0] >= 0;
+}
+
+/* The runs of an ascending order into r (3 ints a run, at most n runs). */
+static slot_runs slot_runs_of(const int *order, int n, int *r)
+{
+    int k = 0;
+    for (int i = 0; i < n; k++) {
+        int len = 1;
+        while (i + len < n && order[i + len] == order[i] + len)
+            len++;
+        r[3 * k] = i, r[3 * k + 1] = order[i], r[3 * k + 2] = len;
+        i += len;
+    }
+    return (slot_runs){r, k};
+}
+
 /* Moves grain data so that slot k holds the grain previously in order[k]
- * (over the world's threads when there are many grains). */
+ * (over the world's threads when there are many grains; in place by one
+ * thread where the order ascends, as keeping a rank's staying grains does). */
 void dem_grains_permute(dem_world *w, const int *order)
 {
     dem_grains *g = &w->g;
     const int n = g->n;
+    const int threads = w->n_threads > 1 && n >= 4096, fw = !threads && order_ascends(order, n);
     double *tmp = w->scratch; /* cap * DEM_SCRATCH_PER_GRAIN doubles: no allocation in the loop */
     double *dbl[] = {g->x,  g->y,  g->z,  g->vx, g->vy, g->vz,    g->wx,    g->wy, g->wz, g->fx, g->fy,
                      g->fz, g->tx, g->ty, g->tz, g->r,  g->inv_m, g->inv_i, g->x0, g->y0, g->z0, g->sc};
     int *ints[] = {g->mat, g->id, g->surf_count, g->shape, g->tag};
     const size_t wh = (size_t)w->wall_stride * w->hist_stride, sh = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE;
+    /* ascending: the runs in the scratch space, which the in-place moves leave unused */
+    _Static_assert(DEM_SCRATCH_PER_GRAIN * sizeof(double) >= 3 * sizeof(int), "scratch holds a run per grain");
+    const slot_runs runs = fw ? slot_runs_of(order, n, (int *)(void *)tmp) : (slot_runs){NULL, 0};
+    const slot_runs *rw = fw ? &runs : NULL;
 #ifdef _OPENMP
-#pragma omp parallel num_threads(w->n_threads) if (w->n_threads > 1 && n >= 4096)
+#pragma omp parallel num_threads(w->n_threads) if (threads)
 #endif
     {
-        for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
-            permute_rows(dbl[k], tmp, sizeof(double), order, n);
-        for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++)
-            permute_rows(ints[k], tmp, sizeof(int), order, n);
-        permute_rows(g->wall_mask, tmp, sizeof *g->wall_mask, order, n);
-        permute_rows(g->frozen, tmp, sizeof *g->frozen, order, n);
-        permute_rows(g->q, tmp, 4 * sizeof(double), order, n);
-        permute_rows(g->inertia, tmp, 3 * sizeof(double), order, n);
-        permute_rows(g->angmom, tmp, 3 * sizeof(double), order, n);
+        /* first, while the wall masks are the old slots' */
 #ifdef _OPENMP
 #pragma omp single
 #endif
         {
-            permute_sparse_rows(g->wall_hist, tmp, w->sparse_held, wh, order, n);
+            permute_sparse_rows(g->wall_hist, tmp, w->sparse_held, wh, order, n, g->wall_mask, fw);
             if (w->surf)
-                permute_sparse_rows(w->surf->hist, tmp, w->sparse_held, sh, order, n);
+                permute_sparse_rows(w->surf->hist, tmp, w->sparse_held, sh, order, n, NULL, fw);
         }
+        for (size_t k = 0; k < sizeof dbl / sizeof dbl[0]; k++)
+            permute_rows(dbl[k], tmp, sizeof(double), order, n, rw);
+        for (size_t k = 0; k < sizeof ints / sizeof ints[0]; k++)
+            permute_rows(ints[k], tmp, sizeof(int), order, n, rw);
+        permute_rows(g->wall_mask, tmp, sizeof *g->wall_mask, order, n, rw);
+        permute_rows(g->frozen, tmp, sizeof *g->frozen, order, n, rw);
+        permute_rows(g->q, tmp, 4 * sizeof(double), order, n, rw);
+        permute_rows(g->inertia, tmp, 3 * sizeof(double), order, n, rw);
+        permute_rows(g->angmom, tmp, 3 * sizeof(double), order, n, rw);
 #ifdef _OPENMP
 #pragma omp for schedule(static)
 #endif
@@ -824,7 +908,7 @@ void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds)
 
 long dem_world_steps(const dem_world *w) { return w->step; }
 
-void dem_world_stats(const dem_world *w, dem_stats *s)
+static void world_stats(const dem_world *w, dem_stats *s, int energies)
 {
     const dem_grains *g = &w->g;
     memset(s, 0, sizeof *s);
@@ -836,7 +920,8 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     for (int i = 0; i < g->n; i++) {
         double m = 1.0 / g->inv_m[i], I = 1.0 / g->inv_i[i];
         s->ke_trans += 0.5 * m * (g->vx[i] * g->vx[i] + g->vy[i] * g->vy[i] + g->vz[i] * g->vz[i]);
-        s->pe_grav -= m * (grav.x * g->x[i] + grav.y * g->y[i] + grav.z * g->z[i]);
+        if (energies)
+            s->pe_grav -= m * (grav.x * g->x[i] + grav.y * g->y[i] + grav.z * g->z[i]);
         if (g->shape[i] >= 0) { /* 1/2 omega.L; the elastic energy of shaped contacts is not summed */
             const double *L = g->angmom + 3 * i;
             s->ke_rot += 0.5 * (g->wx[i] * L[0] + g->wy[i] * L[1] + g->wz[i] * L[2]);
@@ -848,7 +933,8 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
             double dist = (g->x[i] - wl->p[0]) * wl->n[0] + (g->y[i] - wl->p[1]) * wl->n[1] + (g->z[i] - wl->p[2]) * wl->n[2];
             double delta = g->r[i] - dist;
             if (delta > 0.0) {
-                s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][wl->material], g->r[i], delta);
+                if (energies)
+                    s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][wl->material], g->r[i], delta);
                 s->max_overlap = fmax(s->max_overlap, delta / g->r[i]);
             }
         }
@@ -860,8 +946,10 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
         double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
         double d = sqrt(ex * ex + ey * ey + ez * ez), delta = g->r[i] + g->r[j] - d;
         if (delta > 0.0) {
-            double R = g->r[i] * g->r[j] / (g->r[i] + g->r[j]);
-            s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][g->mat[j]], R, delta);
+            if (energies) {
+                double R = g->r[i] * g->r[j] / (g->r[i] + g->r[j]);
+                s->e_elastic += dem_hertz_energy(&w->coef[g->mat[i]][g->mat[j]], R, delta);
+            }
             s->max_overlap = fmax(s->max_overlap, delta / fmin(g->r[i], g->r[j]));
         }
     }
@@ -882,6 +970,9 @@ void dem_world_stats(const dem_world *w, dem_stats *s)
     }
     s->profile = w->prof;
 }
+
+void dem_world_stats(const dem_world *w, dem_stats *s) { world_stats(w, s, 1); }
+void dem_world_stats_lean(const dem_world *w, dem_stats *s) { world_stats(w, s, 0); }
 
 void dem_grain_contact_counts(const dem_world *w, int *out)
 {

@@ -294,9 +294,15 @@ void fem_model_build_load(fem_model *m, const double *f_iface)
     double g[3];
     rot_t(m->wheel.R, m->cfg.gravity, g);
     /* body force rho g: consistent nodal load int N_i rho g = m_i g (the
-     * lumped mass of eq. 33 is exactly int rho N_i) */
-    for (int d = 0; d < s->n_dof; d++)
-        s->f[d] = m->b_pressure[d] + s->mass[d] * g[d % 3];
+     * lumped mass of eq. 33 is exactly int rho N_i); by node, without a
+     * division for d % 3 at every dof */
+    double *restrict f = s->f;
+    const double *restrict bp = m->b_pressure, *restrict mass = s->mass;
+    for (int d = 0; d < s->n_dof; d += 3) {
+        f[d] = bp[d] + mass[d] * g[0];
+        f[d + 1] = bp[d + 1] + mass[d + 1] * g[1];
+        f[d + 2] = bp[d + 2] + mass[d + 2] * g[2];
+    }
     if (f_iface)
         memcpy(m->if_force, f_iface, 3 * (size_t)m->n_if_nodes * sizeof *m->if_force);
     else
@@ -401,24 +407,28 @@ void fem_interface_initial(const fem_model *m, double *x, uint32_t *tris, double
         }
 }
 
-void fem_interface_state(const fem_model *m, double *x, double *v)
+void fem_interface_state(const fem_model *m, double *restrict x, double *restrict v)
 {
-    const fem_wheel *w = &m->wheel;
+    /* the wheel and the arrays taken out of the model once: the stores to x
+     * and v could otherwise alias every field the loop reads */
+    const fem_wheel w = m->wheel;
+    const double *restrict X = m->mesh.x, *restrict U = m->s->u, *restrict V = m->s->v;
+    const uint32_t *restrict nodes = m->if_nodes;
     for (uint32_t k = 0; k < m->n_if_nodes; k++) {
-        uint32_t n = m->if_nodes[k];
+        uint32_t n = nodes[k];
         double r[3], Rr[3], Rv[3];
         for (int a = 0; a < 3; a++)
-            r[a] = m->mesh.x[3 * n + (uint32_t)a] + m->s->u[3 * n + (uint32_t)a];
-        rot(w->R, r, Rr);
+            r[a] = X[3 * n + (uint32_t)a] + U[3 * n + (uint32_t)a];
+        rot(w.R, r, Rr);
         if (x)
             for (int a = 0; a < 3; a++)
-                x[3 * k + (uint32_t)a] = w->center[a] + Rr[a];
+                x[3 * k + (uint32_t)a] = w.center[a] + Rr[a];
         if (v) {
-            rot(w->R, &m->s->v[3 * n], Rv);
+            rot(w.R, &V[3 * n], Rv);
             /* v = v_c + omega x R(X+u) + R du/dt */
-            v[3 * k + 0] = w->v_center[0] + w->omega[1] * Rr[2] - w->omega[2] * Rr[1] + Rv[0];
-            v[3 * k + 1] = w->v_center[1] + w->omega[2] * Rr[0] - w->omega[0] * Rr[2] + Rv[1];
-            v[3 * k + 2] = w->v_center[2] + w->omega[0] * Rr[1] - w->omega[1] * Rr[0] + Rv[2];
+            v[3 * k + 0] = w.v_center[0] + w.omega[1] * Rr[2] - w.omega[2] * Rr[1] + Rv[0];
+            v[3 * k + 1] = w.v_center[1] + w.omega[2] * Rr[0] - w.omega[0] * Rr[2] + Rv[1];
+            v[3 * k + 2] = w.v_center[2] + w.omega[0] * Rr[1] - w.omega[1] * Rr[0] + Rv[2];
         }
     }
 }

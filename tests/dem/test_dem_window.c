@@ -436,6 +436,69 @@ static int frozen_chunks(void)
     return 0;
 }
 
+/* dem_grains_permute moves whole grains: a row of grains sliding on a
+ * floor and against a side wall (their wall springs set, a few hundred
+ * rows of the sparse history marked), then an ascending order (a rank
+ * keeping its staying grains: the first 40 and every 7th dropped, moved in
+ * place by runs) and a reversed one (the re-sort's gather): each slot holds
+ * every bit of the grain it was given, its wall springs with their mark,
+ * and a row left unmarked is all zero. */
+static int permute_moves_whole_grains(void)
+{
+    dem_material m = test_material(5e7, 0.3, 0.5, 0.5);
+    const double g[3] = {0, 0, -9.81}, r = 0.002;
+    dem_world *w = test_world(&m, 1, 1e-5, 1500, g, 1);
+    ENSURE(w);
+    cm_error err = {0};
+    const double floor_p[3] = {0, 0, 0}, up[3] = {0, 0, 1}, side_p[3] = {0, -0.01, 0}, side_n[3] = {0, 1, 0};
+    ENSURE(dem_wall_add(w, floor_p, up, 0, &err) == 0 && dem_wall_add(w, side_p, side_n, 0, &err) == 0);
+    enum { N = 1200 };
+    for (int i = 0; i < N; i++) { /* every other grain touches: on the floor, or a row up in the air */
+        const double p[3] = {0.005 * (i / 3), -0.01 + r * (i % 3 == 0 ? 0.99 : 4.0), i % 2 ? 0.99 * r : 0.05},
+                     v[3] = {0.1 * (1 + i % 5), 0.0, 0.0}, om[3] = {0, 0, 0};
+        int id;
+        ENSURE(dem_grain_add(w, p, r, 0, &id, &err) == 0);
+        ENSURE(dem_grain_set(w, id, p, v, om) == 0);
+    }
+    for (int s = 0; s < 5; s++)
+        ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
+    dem_grains *gr = &w->g;
+    const size_t wh = (size_t)w->wall_stride * w->hist_stride;
+    double *x = malloc(sizeof *x * N), *vx = malloc(sizeof *vx * N), *hist = malloc(sizeof *hist * wh * N);
+    int *tag = malloc(sizeof *tag * N), *order = malloc(sizeof *order * N);
+    uint32_t *mask = malloc(sizeof *mask * N);
+    ENSURE(x && vx && hist && tag && order && mask);
+    for (int pass = 0; pass < 2; pass++) {
+        const int n = gr->n;
+        int marked = 0, k = 0;
+        for (int i = 0; i < n; i++) {
+            x[i] = gr->x[i], vx[i] = gr->vx[i], tag[i] = gr->tag[i], mask[i] = gr->wall_mask[i];
+            memcpy(hist + wh * i, gr->wall_hist + wh * i, wh * sizeof *hist);
+            marked += mask[i] != 0;
+        }
+        ENSURE_MSG(marked > 100, "pass %d: %d grains hold wall springs", pass, marked);
+        for (int i = 0; i < n; i++)
+            if (pass == 1)
+                order[k++] = n - 1 - i;
+            else if (i >= 40 && i % 7)
+                order[k++] = i;
+        gr->n = k;
+        dem_grains_permute(w, order);
+        for (int j = 0; j < k; j++) {
+            const int o = order[j];
+            const double *row = gr->wall_hist + wh * j;
+            ENSURE_MSG(gr->x[j] == x[o] && gr->vx[j] == vx[o] && gr->tag[j] == tag[o] && gr->wall_mask[j] == mask[o] &&
+                           memcmp(row, hist + wh * o, wh * sizeof *row) == 0 && gr->slot_of[gr->id[j]] == j,
+                       "pass %d: slot %d does not hold the grain of slot %d", pass, j, o);
+            for (size_t q = 0; q < wh && !mask[o]; q++)
+                ENSURE_MSG(row[q] == 0.0 && !signbit(row[q]), "pass %d: slot %d's unmarked springs not zero", pass, j);
+        }
+    }
+    free(x), free(vx), free(hist), free(tag), free(order), free(mask);
+    dem_world_destroy(&w);
+    return 0;
+}
+
 /* ---- a rigid wheel through the window vs a long bed ------------------ */
 
 #define CYL_NT 40 /* segments around */
@@ -806,6 +869,7 @@ static const test_case tests[] = {
     {"wall_moves", wall_moves},
     {"frozen_grains", frozen_grains},
     {"frozen_chunks", frozen_chunks},
+    {"permute_moves_whole_grains", permute_moves_whole_grains},
     {"freeze_extents", freeze_extents},
     {"window_config", window_config},
     {"window_matches_long_bed", window_matches_long_bed},

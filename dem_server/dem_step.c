@@ -370,10 +370,10 @@ static int surface_begin(dem_world *w, cm_error *err)
     }
     w->contacts_gw = contacts;
     int rc = CM_OK;
-    if (w->surf)
+    if (w->surf && !w->surf_paused)
         rc = dem_surface_contacts(w, err);
     /* stage "surf_gather" begun: every rank's contacts to rank 0 */
-    if (rc == CM_OK && w->surf && w->dist && w->dist->surf_gather_begin &&
+    if (rc == CM_OK && w->surf && !w->surf_paused && w->dist && w->dist->surf_gather_begin &&
         (rc = w->dist->surf_gather_begin(w, err)) == CM_OK)
         w->surf_pending = 1;
     w->prof.surface += cm_now() - t0;

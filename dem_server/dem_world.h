@@ -221,6 +221,8 @@ struct dem_world {
     long rebuild_count;
 
     dem_surface *surf;
+    int surf_paused; /* the steps leave the surface's contacts alone (dem_window.c's seam relaxation); its
+                      * springs still move with their grains */
 
     dem_shape *shapes;  /* DEM_MAX_SHAPES, allocated by the first dem_shape_add */
     int n_shapes;

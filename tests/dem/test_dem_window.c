@@ -589,6 +589,7 @@ typedef struct wheel_result {
     int warnings;     /* of the footprint check */
     double seam;      /* lowest seam solid fraction relative to the sample's */
     double seconds;
+    long springs_checked; /* the tire's springs checked to stay on their grains over window shifts */
 } wheel_result;
 
 /* A rigid wheel (R 0.1 m, 0.06 m wide) on a bed 0.12 m wide, ~4 cm deep, of
@@ -596,6 +597,53 @@ typedef struct wheel_result {
  * height (sink speed 0.2 m/s x (W - F_z) / W, F_z smoothed over 5 ms): set
  * down for 0.1 s, then driven at 20 % slip, v = 1 m/s, from x = 0.12 m over
  * 0.3 m. Horizontal force and sinkage averaged from x = 0.2 m on. */
+/* The tire's springs on the grains, by tag, and a check that they are
+ * still on the same grains: a window shift removes grains behind, appends
+ * a stretch in front and relaxes its seam with steps whose rebuilds
+ * re-sort the slots. Every grain without a surface contact has an empty
+ * spring row. */
+enum { KEPT_MAX = 4096, SURF_ROW = DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE };
+static int kept_tag[KEPT_MAX], kept_count[KEPT_MAX];
+static double kept_row[KEPT_MAX][SURF_ROW];
+
+static int surface_rows_consistent(const dem_world *w)
+{
+    for (int i = 0; i < w->g.n; i++) {
+        const double *row = w->surf->hist + (size_t)i * SURF_ROW;
+        for (int q = 0; q < SURF_ROW && !w->g.surf_count[i]; q++)
+            ENSURE_MSG(row[q] == 0.0, "slot %d (tag %d): no surface contact but a spring row", i, w->g.tag[i]);
+    }
+    return 0;
+}
+
+static int surface_springs_keep(const dem_world *w, int *n)
+{
+    ENSURE(surface_rows_consistent(w) == 0);
+    *n = 0;
+    for (int i = 0; i < w->g.n; i++)
+        if (w->g.surf_count[i]) {
+            ENSURE(*n < KEPT_MAX);
+            kept_tag[*n] = w->g.tag[i], kept_count[*n] = w->g.surf_count[i];
+            memcpy(kept_row[(*n)++], w->surf->hist + (size_t)i * SURF_ROW, sizeof kept_row[0]);
+        }
+    return 0;
+}
+
+static int surface_springs_kept(const dem_world *w, int n)
+{
+    ENSURE(surface_rows_consistent(w) == 0);
+    for (int k = 0; k < n; k++) {
+        int i = 0;
+        while (i < w->g.n && w->g.tag[i] != kept_tag[k])
+            i++;
+        ENSURE_MSG(i < w->g.n, "grain of tag %d, on the tire, removed by the window", kept_tag[k]);
+        ENSURE_MSG(w->g.surf_count[i] == kept_count[k] &&
+                       memcmp(w->surf->hist + (size_t)i * SURF_ROW, kept_row[k], sizeof kept_row[0]) == 0,
+                   "grain of tag %d lost its springs against the tire in a window shift", kept_tag[k]);
+    }
+    return 0;
+}
+
 static int roll_wheel(double bed_len, uint64_t seed, const dem_window_def *wd, wheel_result *res)
 {
     const double R = 0.1, b = 0.06, v = 1.0, slip = 0.2, omega = v / ((1 - slip) * R), dt = 5e-5;
@@ -636,6 +684,7 @@ static int roll_wheel(double bed_len, uint64_t seed, const dem_window_def *wd, w
     ENSURE_MSG(dem_surface_set(w, CYL_NODES, xw, CYL_TRIS, tri, 1, &err) == 0, "%s", err.msg);
     if (wd)
         res->warnings = dem_window_check_footprint(win, w, wd, x0, wd->expected_sinkage);
+    res->springs_checked = 0;
     double sum_fx = 0, sum_sink = 0, blk = 0, blk_sum = 0, blk_sq = 0, fz_avg = 0;
     long n_avg = 0, n_blk = 0, blk_n = 0;
     res->max_grains = dem_grain_count(w);
@@ -656,8 +705,16 @@ static int roll_wheel(double bed_len, uint64_t seed, const dem_window_def *wd, w
             vw[3 * k] = vx + om * rz, vw[3 * k + 1] = 0, vw[3 * k + 2] = vz - om * rx;
         }
         ENSURE_MSG(dem_surface_update(w, xw, vw, &err) == 0, "%s", err.msg);
-        if (win && step % 10 == 0)
+        if (win && step % 10 == 0) {
+            const int shifts = dem_window_get_state(win)->shifts_back + dem_window_get_state(win)->shifts_front;
+            int n_kept = 0;
+            ENSURE(surface_springs_keep(w, &n_kept) == 0); /* before: recorded by tag */
             ENSURE_MSG(dem_window_update(win, w, c[0], &err) == 0, "%s", err.msg);
+            if (dem_window_get_state(win)->shifts_back + dem_window_get_state(win)->shifts_front != shifts) {
+                ENSURE(surface_springs_kept(w, n_kept) == 0); /* a shift (and its seam relaxed): the same springs */
+                res->springs_checked += n_kept;
+            }
+        }
         ENSURE_MSG(dem_step(w, &err) == 0, "%s", err.msg);
         res->max_grains = fmax(res->max_grains, dem_grain_count(w));
         dem_surface_total t;
@@ -694,9 +751,10 @@ static const dem_window_def wheel_window = {.enabled = true, .behind = 0.11, .ah
 
 static void print_result(const char *what, const wheel_result *r)
 {
-    printf("%-28s Fx %7.2f N (block sd %.2f)  sinkage %5.2f mm  max grains %5d  shifts %d/%d  seam %.2f  %.1f s\n",
+    printf("%-28s Fx %7.2f N (block sd %.2f)  sinkage %5.2f mm  max grains %5d  shifts %d/%d  seam %.2f  "
+           "tire springs kept %ld  %.1f s\n",
            what, r->fx, r->fx_sd, 1e3 * r->sinkage, r->max_grains, r->shifts_back, r->shifts_front, r->seam,
-           r->seconds);
+           r->springs_checked, r->seconds);
 }
 
 /* The window against a long bed: same grain statistics, bed settled from
@@ -712,6 +770,8 @@ static int window_matches_long_bed(void)
     print_result("long bed 0.7 m", &lng);
     print_result("window (0.3 m sample)", &win);
     ENSURE(win.shifts_back >= 2 && win.shifts_front >= 2);
+    /* the tire's springs stayed on their grains over the shifts (roll_wheel) */
+    ENSURE_MSG(win.springs_checked >= 20, "%ld springs checked", win.springs_checked);
     /* the window passes its own footprint check; this 4 cm bed is shallow
      * on purpose (cheap), so the floor is warned about, in both runs alike */
     ENSURE_MSG(win.warnings == DEM_FOOTPRINT_FLOOR, "warnings %#x", win.warnings);

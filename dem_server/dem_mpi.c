@@ -39,7 +39,7 @@ typedef struct dist_ctx {
     int balance;
     double cost;               /* busy s per owned grain-step here, smoothed; 0 before the first measure */
     double *costs;             /* size: every rank's cost */
-    double wall_mark, wait_mark; /* at the previous rebuild: the clock, the waits' CPU time (dem_profile.wait_cpu) */
+    double wall_mark, wait_mark; /* at the previous rebuild's end: the clock, the waits' CPU time (prof.wait_cpu) */
     double added;              /* busy s added since the previous rebuild (dem_mpi_add_busy) */
     long steps_mark, own_mark; /* steps then, grains owned since */
     int *dest;                 /* per slot: rank of the grain's new slab (owned grains) */
@@ -229,7 +229,7 @@ static int grain_weight(dem_world *w, dist_ctx *d, long *weight, cm_error *err)
         if (isfinite(c) && c > 0.0)
             d->cost = d->cost > 0.0 ? 0.75 * d->cost + 0.25 * c : c;
     }
-    d->wall_mark = now, d->wait_mark = waits, d->steps_mark = w->prof.steps, d->added = 0.0;
+    d->added = 0.0; /* the marks themselves are set where the rebuild ends (dist_rebuild) */
     int rc = MPI_Allgather(&d->cost, 1, MPI_DOUBLE, d->costs, 1, MPI_DOUBLE, d->comm);
     if (rc != MPI_SUCCESS)
         return mpi_fail(err, rc, "allgather of the ranks' costs", w->step);

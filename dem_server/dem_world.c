@@ -476,9 +476,11 @@ static inline int row_nonzero(const double *a, size_t len)
  * non-zero; the walls stage clears a spring when it clears the bit, every
  * other writer moves or zeroes a row with its mask), so their rows are not
  * read to be found zero. The surface springs' rows are read (mask NULL):
- * their counts (surf_count) and rows part where a re-sort runs with the
- * surface detached (dem_window.c's seam relaxation), which a debug build
- * of the counts as marks showed. */
+ * their counts (surf_count) parted from the rows while the window's seam
+ * relaxation re-sorted with the surface detached (a debug build of the
+ * counts as marks showed it; fixed in dem_window.c, session 32). The counts
+ * could mark these rows too once a debug run shows them consistent on
+ * every path. */
 static inline int row_marked(const uint32_t *mask, const double *a, size_t len, int i)
 {
     return mask ? mask[i] != 0 : row_nonzero(a + len * (size_t)i, len);

@@ -592,11 +592,6 @@ typedef struct wheel_result {
     long springs_checked; /* the tire's springs checked to stay on their grains over window shifts */
 } wheel_result;
 
-/* A rigid wheel (R 0.1 m, 0.06 m wide) on a bed 0.12 m wide, ~4 cm deep, of
- * grains 6-7 mm, under a vertical load W = 150 N held by a servo on its
- * height (sink speed 0.2 m/s x (W - F_z) / W, F_z smoothed over 5 ms): set
- * down for 0.1 s, then driven at 20 % slip, v = 1 m/s, from x = 0.12 m over
- * 0.3 m. Horizontal force and sinkage averaged from x = 0.2 m on. */
 /* The tire's springs on the grains, by tag, and a check that they are
  * still on the same grains: a window shift removes grains behind, appends
  * a stretch in front and relaxes its seam with steps whose rebuilds
@@ -644,6 +639,11 @@ static int surface_springs_kept(const dem_world *w, int n)
     return 0;
 }
 
+/* A rigid wheel (R 0.1 m, 0.06 m wide) on a bed 0.12 m wide, ~4 cm deep, of
+ * grains 6-7 mm, under a vertical load W = 150 N held by a servo on its
+ * height (sink speed 0.2 m/s x (W - F_z) / W, F_z smoothed over 5 ms): set
+ * down for 0.1 s, then driven at 20 % slip, v = 1 m/s, from x = 0.12 m over
+ * 0.3 m. Horizontal force and sinkage averaged from x = 0.2 m on. */
 static int roll_wheel(double bed_len, uint64_t seed, const dem_window_def *wd, wheel_result *res)
 {
     const double R = 0.1, b = 0.06, v = 1.0, slip = 0.2, omega = v / ((1 - slip) * R), dt = 5e-5;

@@ -344,6 +344,12 @@ void dem_world_stats(const dem_world *w, dem_stats *s);
  * what a health check reads, the overlaps and the kinetic energies, without
  * a Hertz energy (a power 5/2) for every contact. */
 void dem_world_stats_lean(const dem_world *w, dem_stats *s);
+/* dem_world_stats_lean over part `part` of `parts` (0 <= part < parts) of
+ * the grain slots and of the pair list: the kinetic energies and largest
+ * overlap of that share, the clock, counts and the surface's overlaps of
+ * the whole. Over `parts` calls, one per part, every grain and pair is
+ * looked at once: a health check spread over as many exchanges. */
+void dem_world_stats_part(const dem_world *w, int part, int parts, dem_stats *s);
 /* Adds to the profile's idle time (the coupled loop's waits outside the step):
  * seconds of wall time, cpu_seconds of the calling thread's CPU time in them. */
 void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds);

@@ -178,14 +178,19 @@ static int write_outputs(dem_world *w, output_ctx *c, cm_error *err)
         const int frame = step - c->last_frame >= c->cfg->output_every;
         if (!c->frames || (!series && !frame))
             return CM_OK;
-        int rc = gather_view(w, c, err);
+        /* a series row from the ranks' totals, the whole world gathered
+         * only for a frame (the collectives first: rank 0 may fail writing) */
+        dem_stats st;
+        int rc = series ? dem_mpi_series_stats(w, &st, err) : CM_OK;
+        if (rc == CM_OK && frame)
+            rc = gather_view(w, c, err);
         if (series)
             c->last_series = step;
         if (frame)
             c->last_frame = step;
         if (rc || g_rank != 0)
             return rc;
-        if (series && (rc = dem_output_series(c->out, c->view, err)))
+        if (series && (rc = dem_output_series_row(c->out, &st, err)))
             return rc;
         return frame ? dem_output_frame(c->out, c->view, err) : CM_OK;
     }

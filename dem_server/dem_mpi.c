@@ -1156,6 +1156,52 @@ int dem_mpi_gather(dem_world *w, dem_world *view, cm_error *err)
     return gather_into(w, view, 0, err);
 }
 
+enum { TAG_SERIES = 6 };
+
+int dem_mpi_series_stats(dem_world *w, dem_stats *s, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (!d || !w->dist)
+        return cm_fail(err, CM_ERR_STATE, "dem_mpi_series_stats: the world is not distributed");
+    const dem_grains *g = &w->g;
+    const int last = d->size - 1;
+    int rc;
+    dem_stats part;
+    memset(&part, 0, sizeof part);
+    dem_world_stats_rows(w, w->own_lo, &part); /* the pairs' overlaps first: they wait for no other rank */
+    /* the kinetic energies: this rank's owned grains after every grain of the ranks before */
+    double ke[2] = {0.0, 0.0};
+    if (d->rank > 0 &&
+        (rc = MPI_Recv(ke, 2, MPI_DOUBLE, d->rank - 1, TAG_SERIES, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "receive of the series' kinetic energies", w->step);
+    part.ke_trans = ke[0], part.ke_rot = ke[1];
+    dem_world_stats_grains(w, w->own_lo, w->own_hi, &part);
+    ke[0] = part.ke_trans, ke[1] = part.ke_rot;
+    const int to = d->rank < last ? d->rank + 1 : 0; /* the last rank's sums are the whole world's */
+    if (last > 0 && (rc = MPI_Send(ke, 2, MPI_DOUBLE, to, TAG_SERIES, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "send of the series' kinetic energies", w->step);
+    if (last > 0 && d->rank == 0 &&
+        (rc = MPI_Recv(ke, 2, MPI_DOUBLE, last, TAG_SERIES, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "receive of the series' kinetic energies", w->step);
+    long count[4] = {w->own_hi - w->own_lo, 0, w->contacts_gg, w->contacts_gw}, count_all[4] = {0};
+    for (int i = w->own_lo; i < w->own_hi; i++)
+        count[1] += g->frozen[i];
+    double big[2] = {part.max_overlap, w->surf ? w->surf->tot.max_overlap : 0.0}, big_all[2] = {0.0, 0.0};
+    if ((rc = MPI_Reduce(count, count_all, 4, MPI_LONG, MPI_SUM, 0, d->comm)) != MPI_SUCCESS ||
+        (rc = MPI_Reduce(big, big_all, 2, MPI_DOUBLE, MPI_MAX, 0, d->comm)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "reduce of the series' counts and overlaps", w->step);
+    memset(s, 0, sizeof *s);
+    s->time = w->time, s->step = w->step;
+    s->grains = (int)count_all[0], s->frozen = (int)count_all[1];
+    s->ke_trans = ke[0], s->ke_rot = ke[1];
+    s->contacts_gg = (int)count_all[2], s->contacts_gw = (int)count_all[3];
+    s->contacts_gs = w->surf ? w->surf->tot.contacts : 0; /* rank 0 summed every rank's */
+    s->max_overlap = big_all[0], s->max_overlap_surface = big_all[1];
+    s->worst_surface.tag = -1;
+    s->profile = w->prof;
+    return CM_OK;
+}
+
 int dem_mpi_collect(dem_world *w, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;

@@ -266,7 +266,13 @@ done:
 int dem_output_series(dem_output *o, const dem_world *w, cm_error *err)
 {
     dem_stats s;
-    dem_world_stats(w, &s);
+    dem_world_stats_lean(w, &s); /* the row has no energies */
+    return dem_output_series_row(o, &s, err);
+}
+
+int dem_output_series_row(dem_output *o, const dem_stats *st, cm_error *err)
+{
+    const dem_stats s = *st;
     if (fprintf(o->series, "%.9g,%ld,%.9g,%.9g,%d,%d,%d,%.6g,%d,%d,%.6g\n", s.time, s.step, s.ke_trans, s.ke_rot,
                 s.contacts_gg, s.contacts_gw, s.contacts_gs, s.max_overlap, s.grains, s.frozen,
                 s.max_overlap_surface) < 0 ||

@@ -15,6 +15,9 @@ typedef struct dem_output dem_output;
 int dem_output_open(const char *dir, dem_output **out, cm_error *err);
 int dem_output_frame(dem_output *o, const dem_world *w, cm_error *err);  /* grain states */
 int dem_output_series(dem_output *o, const dem_world *w, cm_error *err); /* one line of KE, contacts */
+/* The same line from totals already taken (dem_world_stats_lean's fields,
+ * or dem_mpi_series_stats' for a distributed world). */
+int dem_output_series_row(dem_output *o, const dem_stats *s, cm_error *err);
 void dem_output_close(dem_output **o);
 /* Resuming: reopens the files of `dir` keeping the first `frames` frames and
  * `series_rows` series rows (what a killed run wrote after its checkpoint is

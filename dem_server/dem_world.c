@@ -910,16 +910,15 @@ void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds)
 
 long dem_world_steps(const dem_world *w) { return w->step; }
 
-static void world_stats(const dem_world *w, dem_stats *s, int energies)
+/* Grains [lo, hi): their kinetic energies added to s's sums in slot order
+ * (a sum along the grain order, which dem_mpi_series_stats continues from
+ * rank to rank), the gravity potential and wall energies with `energies`,
+ * s's largest overlap raised to their wall overlaps. */
+static void stats_grains(const dem_world *w, int lo, int hi, dem_stats *s, int energies)
 {
     const dem_grains *g = &w->g;
-    memset(s, 0, sizeof *s);
-    s->time = w->time;
-    s->step = w->step;
-    s->grains = g->n;
-    s->frozen = w->n_frozen;
     vec3 grav = v3_load(w->def.gravity);
-    for (int i = 0; i < g->n; i++) {
+    for (int i = lo; i < hi; i++) {
         double m = 1.0 / g->inv_m[i], I = 1.0 / g->inv_i[i];
         s->ke_trans += 0.5 * m * (g->vx[i] * g->vx[i] + g->vy[i] * g->vy[i] + g->vz[i] * g->vz[i]);
         if (energies)
@@ -941,9 +940,16 @@ static void world_stats(const dem_world *w, dem_stats *s, int energies)
             }
         }
     }
-    for (int p = 0; p < w->n_pairs; p++) {
+}
+
+/* Pairs [p0, p1) whose first grain is at slot row_lo or later: s's largest
+ * overlap raised to theirs, their Hertz energies added with `energies`. */
+static void stats_pairs(const dem_world *w, int p0, int p1, int row_lo, dem_stats *s, int energies)
+{
+    const dem_grains *g = &w->g;
+    for (int p = p0; p < p1; p++) {
         int i = w->pi[p], j = w->pj[p];
-        if ((g->shape[i] & g->shape[j]) >= 0)
+        if (i < row_lo || (g->shape[i] & g->shape[j]) >= 0)
             continue;
         double ex = g->x[i] - g->x[j], ey = g->y[i] - g->y[j], ez = g->z[i] - g->z[j];
         double d = sqrt(ex * ex + ey * ey + ez * ez), delta = g->r[i] + g->r[j] - d;
@@ -955,6 +961,16 @@ static void world_stats(const dem_world *w, dem_stats *s, int energies)
             s->max_overlap = fmax(s->max_overlap, delta / fmin(g->r[i], g->r[j]));
         }
     }
+}
+
+/* The clock, counts and the surface's overlaps (the last surface step's). */
+static void stats_counts(const dem_world *w, dem_stats *s)
+{
+    const dem_grains *g = &w->g;
+    s->time = w->time;
+    s->step = w->step;
+    s->grains = g->n;
+    s->frozen = w->n_frozen;
     s->contacts_gg = w->contacts_gg;
     s->contacts_gw = w->contacts_gw;
     s->contacts_gs = w->surf ? w->surf->tot.contacts : 0;
@@ -973,8 +989,29 @@ static void world_stats(const dem_world *w, dem_stats *s, int energies)
     s->profile = w->prof;
 }
 
+static void world_stats(const dem_world *w, dem_stats *s, int energies)
+{
+    memset(s, 0, sizeof *s);
+    stats_grains(w, 0, w->g.n, s, energies);
+    stats_pairs(w, 0, w->n_pairs, 0, s, energies);
+    stats_counts(w, s);
+}
+
 void dem_world_stats(const dem_world *w, dem_stats *s) { world_stats(w, s, 1); }
 void dem_world_stats_lean(const dem_world *w, dem_stats *s) { world_stats(w, s, 0); }
+
+void dem_world_stats_part(const dem_world *w, int part, int parts, dem_stats *s)
+{
+    memset(s, 0, sizeof *s);
+    const int n = w->g.n, np = w->n_pairs;
+    stats_grains(w, (int)((long)n * part / parts), (int)((long)n * (part + 1) / parts), s, 0);
+    stats_pairs(w, (int)((long)np * part / parts), (int)((long)np * (part + 1) / parts), 0, s, 0);
+    stats_counts(w, s);
+}
+
+void dem_world_stats_grains(const dem_world *w, int lo, int hi, dem_stats *s) { stats_grains(w, lo, hi, s, 0); }
+
+void dem_world_stats_rows(const dem_world *w, int row_lo, dem_stats *s) { stats_pairs(w, 0, w->n_pairs, row_lo, s, 0); }
 
 void dem_grain_contact_counts(const dem_world *w, int *out)
 {

@@ -338,5 +338,12 @@ int dem_pairs_contacts(const dem_world *w, int p0, int p1);
 /* dem_world.c: moves grain data so that slot k holds the grain previously in
  * order[k] (the re-sort at a rebuild). */
 void dem_grains_permute(dem_world *w, const int *order);
+/* dem_world.c, distributed: a rank's share of dem_world_stats_lean, added
+ * into s (the counts and clock are the caller's, dem_mpi_series_stats):
+ * grains [lo, hi), their kinetic energies added to s's sums in slot order
+ * and their wall overlaps; the pairs whose first grain is at slot row_lo or
+ * later, their overlaps. */
+void dem_world_stats_grains(const dem_world *w, int lo, int hi, dem_stats *s);
+void dem_world_stats_rows(const dem_world *w, int row_lo, dem_stats *s);
 
 #endif

@@ -60,8 +60,11 @@ void fem_model_build_load(fem_model *m, const double *f_iface);
  * X + u that is inverted (signed volume <= 0; 10-node elements: det J <= 0
  * at a quadrature point) or stretched beyond cfg.max_strain (largest
  * |component| of its small strain, at each quadrature point for tet10). O(n_tets), no
- * allocation; fem_advance calls it every 10 cfg.check_every intervals. */
+ * allocation. The range version looks at elements [e0, e1) only: fem_advance
+ * checks a share after each interval, every element once per 10
+ * cfg.check_every intervals. */
 int fem_check_elements(const fem_model *m, cm_error *err);
+int fem_check_elements_range(const fem_model *m, int e0, int e1, cm_error *err);
 
 /* Energy guard: fails when the tire's energy E (above) has grown by more than
  * 5 % of the energy scale (initial elastic energy + the loads' absolute work)

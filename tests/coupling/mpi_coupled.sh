@@ -9,9 +9,9 @@
 # two cores ./run binds the ranks and fem_server; dem_profile_ranks.csv must
 # then have two ranks' rows). Every run must end in the same
 # dem_world_hash and fem_state_hash and write the same result files:
-# traction.csv, summary.json, fem_series.csv, dem_series.csv (energies
-# summed over the grains gathered on rank 0, the ranks' contact counts
-# added) and the run records byte for byte, every dataset of dem_grains.h5
+# traction.csv, summary.json, fem_series.csv, dem_series.csv (kinetic
+# energies summed along the global grain order from rank to rank, the
+# ranks' contact counts added) and the run records byte for byte, every dataset of dem_grains.h5
 # (the ranks' grains gathered on rank 0), wheel.h5 and fem.h5 byte for byte.
 # So that the test could fail, the distributed runs must have moved grains
 # between ranks, found surface contacts on more than one rank (the runs by

@@ -4,8 +4,9 @@
 # must log the same final state hash (dem_mpi_hash gathers the whole world
 # in tag order), write the same grain frames (every dataset of every
 # frame byte for byte: the ranks' grains gathered on rank 0) and the same
-# dem_series.csv byte for byte (more than its initial row: energies summed
-# over the gathered grains, the ranks' contact counts added), and the
+# dem_series.csv byte for byte (more than its initial row: kinetic energies
+# summed along the global grain order from rank to rank, the ranks' contact
+# counts added), and the
 # distributed runs must have moved grains between ranks.
 # Usage: mpi_server.sh DEM_SERVER MPIEXEC
 set -uo pipefail

@@ -284,6 +284,28 @@ static int energy_conservation(void)
         dem_world_stats_lean(w, &lean);
         ENSURE(lean.max_overlap == st.max_overlap && lean.ke_trans == st.ke_trans && lean.ke_rot == st.ke_rot);
         ENSURE(lean.e_elastic == 0.0 && lean.pe_grav == 0.0);
+        /* the health check a part at a time (dem_world_stats_part): the
+         * parts' largest overlap is the whole's, their kinetic energies add
+         * up to it (a part left out would miss a seventh), one part of one
+         * is the whole, bit for bit */
+        if (step % 50 == 0) {
+            enum { PARTS = 7 };
+            dem_stats part, one;
+            double big = 0.0, ke = 0.0;
+            for (int k = 0; k < PARTS; k++) {
+                dem_world_stats_part(w, k, PARTS, &part);
+                big = fmax(big, part.max_overlap);
+                ke += part.ke_trans + part.ke_rot;
+                ENSURE(part.grains == lean.grains && part.contacts_gg == lean.contacts_gg && part.step == lean.step);
+            }
+            ENSURE_MSG(big == lean.max_overlap, "step %d: parts' largest overlap %.17g, the whole's %.17g", step, big,
+                       lean.max_overlap);
+            ENSURE_MSG(fabs(ke - (lean.ke_trans + lean.ke_rot)) <= 1e-12 * (lean.ke_trans + lean.ke_rot),
+                       "step %d: parts' kinetic energy %.17g, the whole's %.17g", step, ke,
+                       lean.ke_trans + lean.ke_rot);
+            dem_world_stats_part(w, 0, 1, &one);
+            ENSURE(one.max_overlap == lean.max_overlap && one.ke_trans == lean.ke_trans && one.ke_rot == lean.ke_rot);
+        }
         overlapping += st.max_overlap > 0.0 && st.e_elastic > 0.0;
         int c = st.contacts_gg + st.contacts_gw;
         collisions += c > 0 && !was;

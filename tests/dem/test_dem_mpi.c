@@ -143,6 +143,26 @@ static int same_as_one_process(const dem_world *ref, const dem_world *v, long *w
     return 0;
 }
 
+/* dem_mpi_series_stats (a series row without gathering the world) against
+ * one process's dem_world_stats_lean, bit for bit: the kinetic energies
+ * summed along the global grain order across the ranks (a sum of the ranks'
+ * own sums would differ in the last bits), the counts and largest overlaps. */
+static int same_series_totals(const dem_world *ref, const dem_stats *s)
+{
+    dem_stats a;
+    dem_world_stats_lean(ref, &a);
+    ENSURE_MSG(SAME_ARRAY(&a.ke_trans, &s->ke_trans, 1) && SAME_ARRAY(&a.ke_rot, &s->ke_rot, 1),
+               "step %ld: kinetic energies %.17g / %.17g over the ranks, one process %.17g / %.17g", ref->step,
+               s->ke_trans, s->ke_rot, a.ke_trans, a.ke_rot);
+    ENSURE_MSG(SAME_ARRAY(&a.max_overlap, &s->max_overlap, 1) && a.max_overlap > 0.0,
+               "step %ld: largest overlap %.17g over the ranks, one process %.17g", ref->step, s->max_overlap,
+               a.max_overlap);
+    ENSURE(a.grains == s->grains && a.frozen == s->frozen && a.contacts_gg == s->contacts_gg &&
+           a.contacts_gw == s->contacts_gw && a.contacts_gs == s->contacts_gs && a.step == s->step &&
+           SAME_ARRAY(&a.time, &s->time, 1) && SAME_ARRAY(&a.max_overlap_surface, &s->max_overlap_surface, 1));
+    return 0;
+}
+
 enum { CHECK_EVERY = 250, CUT_STEP = 750 };
 #define X_CUT 0.03 /* m: grains removed behind it at CUT_STEP, as the terrain window does */
 
@@ -197,9 +217,12 @@ static int same_bits(void)
         dem_mpi_stats_get(w, &s);
         cross = s.cross_pairs > cross ? s.cross_pairs : cross;
         if ((k + 1) % CHECK_EVERY == 0) {
+            dem_stats ss;
+            ENSURE_MSG(dem_mpi_series_stats(w, &ss, &err) == 0, "rank %d: %s", g_rank, err.msg);
             ENSURE_MSG(dem_mpi_gather(w, view, &err) == 0, "rank %d: %s", g_rank, err.msg);
             if (ref) {
                 ENSURE(same_as_one_process(ref, view, &wall_contacts) == 0);
+                ENSURE(same_series_totals(ref, &ss) == 0);
                 checks++;
             }
         }

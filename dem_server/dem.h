@@ -136,7 +136,7 @@ typedef struct dem_grain_state {
     double x[3];     /* position of the centre, m */
     double v[3];     /* velocity, m/s (predicted half-step value, see above) */
     double w[3];     /* angular velocity, rad/s */
-    double q[4];     /* orientation quaternion (w, x, y, z) */
+    double q[4];     /* orientation quaternion (w, x, y, z); a sphere's turns only in a world with shaped grains */
     double f[3];     /* total force of the last step, N */
     double t[3];     /* total torque of the last step, N m */
     double radius;   /* m */

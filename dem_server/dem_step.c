@@ -7,7 +7,7 @@
  *   pairs      grain–grain narrow phase over the neighbour list, each     (dem_step_grains)
  *              pair's force added into its grains in pair-list order, the
  *              same sums for any thread count (dem_pairs.c)
- *   integrate  Verlet (eqs. 4–5), ω and quaternion, largest displacement
+ *   integrate  Verlet (eqs. 4–5), ω, quaternion (with shaped grains), largest displacement
  *   halo       distributed run only: the ghosts' states from their ranks,
  *              the largest displacement over all ranks (dem_mpi.c)
  *   rebuild    neighbour grid, re-sort and pair list when a grain moved
@@ -483,12 +483,12 @@ static inline __attribute__((always_inline)) void kick_drift(double *restrict v,
  * v(t) = v(t-dt/2) + a(t) dt/2 completes the previous step, v(t+dt/2) =
  * v(t) + a(t) dt/2 predicts, and x(t+dt) = x(t) + v(t+dt/2) dt = x + v dt +
  * a dt²/2 (eq. 4). Spheres: ω integrated directly (no gyroscopic term),
- * orientation as a unit quaternion rotated by ω dt (no Euler-angle
+ * orientation (orient) as a unit quaternion rotated by ω dt (no Euler-angle
  * singularity, eq. 9 avoided). *maxd2: the largest squared displacement
  * since the last rebuild; returns the first slot with a non-finite position,
  * or INT_MAX. */
 static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, int lo, int hi, double dt,
-                                                                 double *maxd2_out)
+                                                                 const int orient, double *maxd2_out)
 {
     double *restrict x = g->x, *restrict y = g->y, *restrict z = g->z;
     double *restrict wx = g->wx, *restrict wy = g->wy, *restrict wz = g->wz;
@@ -529,6 +529,8 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
          * four grains at a time are transposed into one vector per
          * component (quat_step4), the same operations in each lane as
          * quat_step on one. */
+        if (!orient)
+            continue;
         int k = c0;
         for (; k + 4 <= c1; k += 4)
             quat_step4(qa + 4 * (size_t)k, wx + k, wy + k, wz + k, frozen + k, dt);
@@ -547,23 +549,24 @@ static inline __attribute__((always_inline)) int integrate_body(dem_grains *g, i
 }
 
 #if defined(__x86_64__) && defined(__GNUC__)
-__attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo, int hi, double dt, double *maxd2)
+__attribute__((target("avx2"))) static int integrate_avx2(dem_grains *g, int lo, int hi, double dt, int orient,
+                                                          double *maxd2)
 {
-    return integrate_body(g, lo, hi, dt, maxd2);
+    return integrate_body(g, lo, hi, dt, orient, maxd2);
 }
 #endif
 
 /* The AVX2 build of the loop where dem_kernels_of allows it (build; no
  * AVX-512 build: see there): the same bits, as for the pair kernel. */
-static int integrate_range(dem_grains *g, int lo, int hi, double dt, double *maxd2, int build)
+static int integrate_range(dem_grains *g, int lo, int hi, double dt, int orient, double *maxd2, int build)
 {
 #if defined(__x86_64__) && defined(__GNUC__)
     if (build >= DEM_KERNELS_AVX2)
-        return integrate_avx2(g, lo, hi, dt, maxd2);
+        return integrate_avx2(g, lo, hi, dt, orient, maxd2);
 #else
     (void)build;
 #endif
-    return integrate_body(g, lo, hi, dt, maxd2);
+    return integrate_body(g, lo, hi, dt, orient, maxd2);
 }
 
 /* Stage "integrate": integrate_range over the threads, then the rotation
@@ -575,7 +578,13 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
     const int nt = w->n_threads;
     const int g0 = w->dist ? w->own_lo : 0, n = w->dist ? w->own_hi : g->n; /* the owned grains */
     const double dt = w->def.dt;
-    const int shaped = w->n_shaped > 0, build = dem_kernels_of(&w->def);
+    /* A sphere's orientation feeds back into nothing (not its forces, not
+     * the state hash) and frames write orientations only in a world with
+     * shaped grains (dem_output.c): in a world of spheres it is not
+     * integrated, and stays as the grain was made or last set. The
+     * quaternion's pass was ~44 % of this stage on the paper scene's rank 1
+     * (perf, session 34); nothing else moves by a bit. */
+    const int shaped = w->n_shaped > 0, orient = shaped, build = dem_kernels_of(&w->def);
     double maxd2 = 0.0;
     int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
@@ -584,7 +593,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, g0, n, dt, &maxd2, build);
+        bad = integrate_range(g, g0, n, dt, orient, &maxd2, build);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -593,7 +602,8 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             int tid = dem_thread_id();
             double m2;
             const long no = n - g0;
-            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, &m2, build);
+            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, orient, &m2,
+                                    build);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;
         }

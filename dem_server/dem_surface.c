@@ -826,22 +826,62 @@ static int shaped_candidates(const dem_world *w, int i, vec3 c, double r, const 
     return m;
 }
 
+/* 1 if the box [lo, hi] overlaps a leaf's box of the tree (or the walk's
+ * stack would overflow): a sphere inside the box can come near a triangle
+ * only then, as every triangle lies inside its leaf's box. */
+static int box_meets_leaf(const dem_surface *s, const double lo[3], const double hi[3])
+{
+    int stack[64], sp = 0;
+    stack[sp++] = 0;
+    while (sp > 0) {
+        const dem_bvh_node *nd = &s->bvh[stack[--sp]];
+        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] || nd->lo[2] > hi[2] ||
+            nd->hi[2] < lo[2])
+            continue;
+        if (nd->right < 0 || sp + 2 > 64)
+            return 1;
+        stack[sp++] = nd->right;
+        stack[sp++] = (int)(nd - s->bvh) + 1;
+    }
+    return 0;
+}
+
+/* Grains whose lists are built together (surf_lists_build). */
+enum { SURF_LIST_GROUP = 32 };
+
 /* The triangle lists of grains [lo, hi): every triangle whose closest point
  * lies within r + margin of the grain's centre, in the tree's order. A grain
  * without one cannot touch the surface before the lists are rebuilt: its
- * springs are cleared now. Returns the slot of a grain whose tree walk
+ * springs are cleared now. The grains are taken in groups of consecutive
+ * slots: where the group's box (each grain's r + margin around it) meets no
+ * leaf of the tree, no grain of it walks the tree, and its lists are empty
+ * as the walks would leave them. Slots are in cell order after a re-sort,
+ * so a group is a few cells of one column: the soil under the tire's box
+ * but away from its tread (most of the grains inside the tire's box) is
+ * passed over a group at a time. Returns the slot of a grain whose tree walk
  * overflowed, or -1; sets sc->nomem when a list cannot grow. */
 static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi, double margin, surf_scratch *sc)
 {
     const dem_bvh_node *root = &s->bvh[0];
-    int overflow_slot = -1;
+    int overflow_slot = -1, near = 0;
     sc->n_lg = sc->n_lt = 0;
     for (int i = lo; i < hi; i++) {
+        if ((i - lo) % SURF_LIST_GROUP == 0) { /* the next group: does it come near a leaf? */
+            const int e = hi - i > SURF_LIST_GROUP ? i + SURF_LIST_GROUP : hi;
+            double blo[3] = {INFINITY, INFINITY, INFINITY}, bhi[3] = {-INFINITY, -INFINITY, -INFINITY};
+            for (int k = i; k < e; k++) {
+                const double rk = g->r[k] + margin;
+                blo[0] = min2(blo[0], g->x[k] - rk), bhi[0] = max2(bhi[0], g->x[k] + rk);
+                blo[1] = min2(blo[1], g->y[k] - rk), bhi[1] = max2(bhi[1], g->y[k] + rk);
+                blo[2] = min2(blo[2], g->z[k] - rk), bhi[2] = max2(bhi[2], g->z[k] + rk);
+            }
+            near = box_meets_leaf(s, blo, bhi);
+        }
         double r = g->r[i] + margin;
         vec3 c = v3(g->x[i], g->y[i], g->z[i]);
         int start = sc->n_lt;
-        if (!(root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r || root->hi[1] < c.y - r ||
-              root->lo[2] > c.z + r || root->hi[2] < c.z - r)) {
+        if (near && !(root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r ||
+                      root->hi[1] < c.y - r || root->lo[2] > c.z + r || root->hi[2] < c.z - r)) {
             int overflow = 0, t, reg;
             double bary[3], cp[3], d2;
             near_iter it;

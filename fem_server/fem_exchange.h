@@ -50,7 +50,8 @@ extern const char *const fem_stage_names[FEM_STAGE_COUNT];
 typedef struct fem_profile {
     double seconds[FEM_STAGE_COUNT]; /* s of wall time per stage, summed over the exchanges */
     double cpu_seconds[FEM_STAGE_COUNT]; /* s of the process's CPU time per stage (fem_server is one thread;
-                                            receive's includes the wait's spin) */
+                                            receive's includes the wait's spin; the short stages between receive,
+                                            advance, snapshot and record: their wall time, fem_exchange.c) */
     long exchanges;                  /* exchanges timed */
 } fem_profile;
 

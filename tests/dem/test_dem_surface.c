@@ -5,6 +5,7 @@
 
 #include "dem_bed.h"
 #include "dem_surface.h"
+#include "dem_world.h"
 #include "test_dem_common.h"
 
 static const double R0 = 0.005;
@@ -774,6 +775,64 @@ static int fe_share_stiffening(void)
     return 0;
 }
 
+/* The surface lists pass over groups of slots whose box meets no leaf of
+ * the tree (dem_surface.c, surf_lists_build): a 10 x 10 x 6 lattice of
+ * grains, 2 mm, falling at 0.5 m/s onto a 6.4 cm plate with a 6 mm dent
+ * (dented_surface), the lowest layer 0.25 mm above its flat part (under
+ * half a skin: they touch before the lists are rebuilt), the others up to
+ * 3.5 cm higher and beyond its edges (groups far, near, and split between
+ * the two), stepped for 300 steps. At every step, each grain has a surface contact if and
+ * only if a triangle's closest point lies within its radius (every triangle
+ * tried), and the lists were built more than once. */
+static int lists_pass_far_groups(void)
+{
+    dem_material m[2] = {test_material(5e7, 0.3, 0.5, 0.5), test_material(5e7, 0.3, 0.5, 0.5)};
+    double g[3] = {0, 0, -9.81};
+    dem_world *w = test_world(m, 2, 1e-5, 600, g, 1); /* material 1: the surface's */
+    ENSURE(w);
+    cm_error err = {0};
+    const double r = 0.002;
+    ENSURE(dented_surface(w, 16, 0.004, 0.02, 0.006) == 0);
+    const int nt = w->surf->n_tris;
+    const double *x = w->surf->x; /* the surface never moves here */
+    const int *t = w->surf->tri;
+    for (int ix = 0; ix < 10; ix++)
+        for (int iy = 0; iy < 10; iy++)
+            for (int iz = 0; iz < 6; iz++) {
+                const double p[3] = {-0.045 + 0.01 * ix + 0.0007 * iz, -0.045 + 0.01 * iy + 0.0005 * iz,
+                                     0.00225 + 0.007 * iz},
+                             v[3] = {0, 0, -0.5}, om[3] = {0, 0, 0};
+                int id;
+                ENSURE(dem_grain_add(w, p, r, 0, &id, &err) == 0);
+                ENSURE(dem_grain_set(w, id, p, v, om) == 0);
+            }
+    long touched = 0;
+    for (int step = 0; step < 300; step++) {
+        ENSURE_MSG(dem_step_surface(w, &err) == 0, "%s", err.msg);
+        const dem_grains *gr = &w->g;
+        for (int i = 0; i < gr->n; i++) {
+            const double c[3] = {gr->x[i], gr->y[i], gr->z[i]};
+            int over = 0;
+            for (int k = 0; k < nt && !over; k++) {
+                const int *tk = t + 3 * k;
+                double bary[3], cp[3];
+                dem_closest_on_triangle(c, x + 3 * tk[0], x + 3 * tk[1], x + 3 * tk[2], bary, cp);
+                const double d2 = (c[0] - cp[0]) * (c[0] - cp[0]) + (c[1] - cp[1]) * (c[1] - cp[1]) +
+                                  (c[2] - cp[2]) * (c[2] - cp[2]);
+                over = d2 < gr->r[i] * gr->r[i];
+            }
+            ENSURE_MSG((gr->surf_count[i] > 0) == over, "step %d, grain %d at (%g, %g, %g): %d surface contacts, "
+                       "overlaps a triangle: %d", step, gr->id[i], c[0], c[1], c[2], gr->surf_count[i], over);
+            touched += over;
+        }
+        ENSURE_MSG(dem_step_grains(w, &err) == 0, "%s", err.msg);
+    }
+    ENSURE_MSG(touched > 1000, "only %ld grain-steps touched the plate", touched);
+    ENSURE_MSG(w->prof.surface_lists > 1, "lists built %ld times", (long)w->prof.surface_lists);
+    dem_world_destroy(&w);
+    return 0;
+}
+
 /* Error paths name the culprit. */
 static int errors_name_culprit(void)
 {
@@ -803,6 +862,7 @@ static int errors_name_culprit(void)
 static const test_case tests[] = {
     {"plate_sinkage", plate_sinkage},
     {"errors_name_culprit", errors_name_culprit},
+    {"lists_pass_far_groups", lists_pass_far_groups},
     {"closest_point_regions", closest_point_regions},
     {"resting_force_anywhere", resting_force_anywhere},
     {"rebound_wall_vs_triangles", rebound_wall_vs_triangles},

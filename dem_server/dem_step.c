@@ -584,7 +584,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
      * integrated, and stays as the grain was made or last set. The
      * quaternion's pass was ~44 % of this stage on the paper scene's rank 1
      * (perf, session 34); nothing else moves by a bit. */
-    const int shaped = w->n_shaped > 0, orient = shaped, build = dem_kernels_of(&w->def);
+    const int shaped = w->n_shaped > 0, build = dem_kernels_of(&w->def);
     double maxd2 = 0.0;
     int bad = INT_MAX;
     double *qsave = w->scratch; /* free between rebuilds (cap * DEM_SCRATCH_PER_GRAIN >= 4 per grain) */
@@ -593,7 +593,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             if (g->shape[i] >= 0)
                 memcpy(qsave + 4 * i, g->q + 4 * i, 4 * sizeof *qsave);
     if (nt == 1) {
-        bad = integrate_range(g, g0, n, dt, orient, &maxd2, build);
+        bad = integrate_range(g, g0, n, dt, shaped, &maxd2, build);
     } else {
 #ifdef _OPENMP
 #pragma omp parallel num_threads(nt) reduction(max : maxd2) reduction(min : bad)
@@ -602,7 +602,7 @@ static int stage_integrate(dem_world *w, double *maxd2_out)
             int tid = dem_thread_id();
             double m2;
             const long no = n - g0;
-            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, orient, &m2,
+            int b = integrate_range(g, g0 + (int)(no * tid / nt), g0 + (int)(no * (tid + 1) / nt), dt, shaped, &m2,
                                     build);
             maxd2 = m2 > maxd2 ? m2 : maxd2;
             bad = b < bad ? b : bad;

@@ -409,6 +409,14 @@ static int cand_feature(const dem_surface *s, const cand *c, int nodes[2])
     }
 }
 
+/* 1 if node nd's box and the box [lo, hi] are apart (no overlap along
+ * some axis): nothing under nd lies in [lo, hi]. */
+static inline int node_apart(const dem_bvh_node *nd, const double lo[3], const double hi[3])
+{
+    return nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] || nd->lo[2] > hi[2] ||
+           nd->hi[2] < lo[2];
+}
+
 /* Walks the BVH for the triangles whose closest point to p lies within r,
  * in a fixed order (depth first, left child first, leaf order), for both the
  * sphere and the shaped contact paths. A traversal stack deeper than 64
@@ -477,8 +485,7 @@ static inline int near_next(near_iter *it, int *t, int *region, double bary[3], 
         if (it->sp == 0)
             return 0;
         const dem_bvh_node *nd = &s->bvh[it->stack[--it->sp]];
-        if (nd->lo[0] > it->hi[0] || nd->hi[0] < it->lo[0] || nd->lo[1] > it->hi[1] || nd->hi[1] < it->lo[1] ||
-            nd->lo[2] > it->hi[2] || nd->hi[2] < it->lo[2])
+        if (node_apart(nd, it->lo, it->hi))
             continue;
         if (nd->right >= 0) {
             if (it->sp + 2 > 64) {
@@ -835,8 +842,7 @@ static int box_meets_leaf(const dem_surface *s, const double lo[3], const double
     stack[sp++] = 0;
     while (sp > 0) {
         const dem_bvh_node *nd = &s->bvh[stack[--sp]];
-        if (nd->lo[0] > hi[0] || nd->hi[0] < lo[0] || nd->lo[1] > hi[1] || nd->hi[1] < lo[1] || nd->lo[2] > hi[2] ||
-            nd->hi[2] < lo[2])
+        if (node_apart(nd, lo, hi))
             continue;
         if (nd->right < 0 || sp + 2 > 64)
             return 1;

@@ -355,6 +355,27 @@ void dem_world_stats_part(const dem_world *w, int part, int parts, dem_stats *s)
 void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds);
 /* Steps taken so far (cheap; dem_world_stats sums over every grain and pair). */
 long dem_world_steps(const dem_world *w);
+
+/* Distributed on two ranks (dem_mpi.h): `bytes` of buf carried from rank 0
+ * to rank 1 in the next step's halo exchange, the one message the two
+ * ranks swap after integrating (with the ghosts' states and the rebuild's
+ * agreement), instead of in a collective of their own. The coupled loop
+ * (dem_coupled.c) sends fem_server's reply this way. Rank 0 calls fill (if
+ * any) just before sending: its time is a wait (dem_profile.idle), not the
+ * halo's. Set on both ranks with the same bytes, for one
+ * dem_step_grains. */
+typedef struct dem_halo_rider {
+    void *buf;
+    size_t bytes;
+    int (*fill)(void *user, cm_error *err); /* rank 0: writes buf */
+    void *user;
+    double fill_s; /* out, rank 0: s spent in fill */
+    int carried;   /* out: 1 once the step's halo has carried buf */
+} dem_halo_rider;
+
+/* r rides the next halo (r NULL: none); the world keeps the pointer and
+ * writes r's outputs. Fails unless the world is distributed on two ranks. */
+int dem_world_set_halo_rider(dem_world *w, dem_halo_rider *r, cm_error *err);
 /* Total force on wall k from the last step (the grains push it), N. */
 int dem_wall_force(const dem_world *w, int k, double f[3]);
 /* Contacts per grain (by id), out has dem_grain_count entries. */

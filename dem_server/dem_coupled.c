@@ -17,7 +17,9 @@
  *             neighbour rebuild): overlaps the FEM's step
  *   wait      the FEM's reply: surface positions and velocities at t + k dt
  *   surf_bcast distributed (def->dist): the reply from rank 0, the one that
- *             talks to fem_server, to the other ranks
+ *             talks to fem_server, to the other ranks; on two ranks it
+ *             rides stage grains' halo exchange instead (rank 0 waits for
+ *             it there, timed as stage wait)
  *   update    dem_surface_update (the tree's root box; the rest of the tree
  *             is refitted in stage surface when the tree is walked), the
  *             terrain window moved
@@ -64,7 +66,8 @@ typedef struct coupled {
     double time;
     long n;
     int *asked_checkpoint;
-    int ipc_rc;    /* the send's ring status */
+    const int *stop_requested;
+    int ipc_rc;    /* the send's (or the reply's, received in the halo) ring status */
     double send_s; /* s, stage send so far */
 } coupled;
 
@@ -304,13 +307,51 @@ static int bcast_surface(coupled *c, const dem_coupled_dist *dist, uint32_t *nt,
     return CM_OK;
 }
 
+/* Stage "wait" on rank 0: fem_server's reply into c->msg: the frame's
+ * kind and flags, the wheel's x, whether the run stops, distributed what
+ * the window does, and a data frame's surface positions and velocities.
+ * Returns the ring's status. */
+static int receive_reply(coupled *c)
+{
+    const size_t m = 3 * (size_t)c->nn;
+    reply *const in = &c->msg->in;
+    memset(in, 0, sizeof *in);
+    const ipc_frame_head *head;
+    const double *q;
+    int ipc_rc = ipc_recv(c->ch, &head, &q);
+    if (ipc_rc)
+        return ipc_rc;
+    in->kind = head->kind, in->flags = head->flags, in->wheel_x = head->info[IPC_INFO_CENTER_X];
+    /* After our own request the run ends whether or not the peer
+     * checkpointed (a FEM side without checkpoints ignores it). */
+    in->stop_requested = *c->stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || *c->asked_checkpoint;
+    if (c->def->dist && c->def->window && head->kind == IPC_FRAME_DATA && isfinite(in->wheel_x))
+        in->window = dem_window_pending(c->def->window, in->wheel_x, &in->freeze_lo, &in->freeze_hi);
+    if (head->kind == IPC_FRAME_DATA) {
+        memcpy(c->x, q, m * sizeof *c->x);
+        memcpy(c->v, q + m, m * sizeof *c->v);
+    }
+    ipc_recv_release(c->ch);
+    return IPC_OK;
+}
+
+/* On two ranks the reply rides the step's halo (dem_halo_rider): rank 0
+ * receives it just before the halo exchange, which takes it to rank 1. */
+static int rider_fill(void *user, cm_error *err)
+{
+    coupled *c = user;
+    c->ipc_rc = receive_reply(c);
+    return c->ipc_rc ? cm_fail(err, CM_ERR_PEER, "%s", ipc_error(c->ch)) : CM_OK;
+}
+
 int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, dem_coupled_hooks *hooks,
                     cm_error *err)
 {
     const dem_coupled_dist *dist = def->dist;
     const int root = !dist || dist->rank == 0; /* talks to fem_server */
     int stop_requested = 0, asked_checkpoint = 0;
-    coupled c = {.w = w, .def = def, .ch = ch, .root = root, .asked_checkpoint = &asked_checkpoint};
+    coupled c = {.w = w, .def = def, .ch = ch, .root = root, .asked_checkpoint = &asked_checkpoint,
+                 .stop_requested = &stop_requested};
     int rc = CM_OK;     /* common/error.h codes */
     int ipc_rc = IPC_OK; /* ipc.h codes of the exchange, mapped to CM_ERR_PEER at the end */
 
@@ -414,44 +455,41 @@ int dem_run_coupled(dem_world *w, ipc_channel *ch, const dem_coupled_def *def, d
         if (finish && root && (ipc_rc = stage_send(&c, def, finish, time, n, &c.acc, &asked_checkpoint)))
             break;
         lap(&t_lap, &prof.send);
+        /* two ranks: the reply rides this step's halo (stages wait and
+         * surf_bcast happen inside stage grains; rider_fill's time is
+         * moved to stage wait) */
+        dem_halo_rider rider = {.buf = c.msg, .bytes = msg_bytes, .fill = root ? rider_fill : NULL, .user = &c};
+        const int ride = dist && dist->ranks == 2 && !finish;
+        if (ride && (rc = dem_world_set_halo_rider(w, &rider, err)))
+            goto done;
         rc = finish ? CM_OK : dem_step_grains(w, err);
+        if (ride)
+            (void)dem_world_set_halo_rider(w, NULL, err);
         if (c.ipc_rc)
             break;
         if (rc)
             goto done;
         lap(&t_lap, &prof.grains);
         prof.surface -= send1 - send0, prof.grains -= c.send_s - send1, prof.send += c.send_s - send0;
+        prof.grains -= rider.fill_s, prof.wait += rider.fill_s;
 
         reply *const in = &c.msg->in;
-        memset(in, 0, sizeof *in);
-        const double idle0 = prof.wait + prof.bcast, cpu0 = dist ? cm_thread_cpu_now() : 0.0;
-        if (root) {
-            const ipc_frame_head *head;
-            const double *q;
-            if ((ipc_rc = ipc_recv(c.ch, &head, &q)))
+        if (!rider.carried) {
+            const double idle0 = prof.wait + prof.bcast, cpu0 = dist ? cm_thread_cpu_now() : 0.0;
+            if (root && (ipc_rc = receive_reply(&c)))
                 break;
-            in->kind = head->kind, in->flags = head->flags, in->wheel_x = head->info[IPC_INFO_CENTER_X];
-            /* After our own request the run ends whether or not the peer
-             * checkpointed (a FEM side without checkpoints ignores it). */
-            in->stop_requested = stop_requested || (head->flags & IPC_FLAG_STOP_REQUEST) != 0 || asked_checkpoint;
-            if (dist && def->window && head->kind == IPC_FRAME_DATA && isfinite(in->wheel_x))
-                in->window = dem_window_pending(def->window, in->wheel_x, &in->freeze_lo, &in->freeze_hi);
-            if (head->kind == IPC_FRAME_DATA) {
-                memcpy(c.x, q, m * sizeof *c.x);
-                memcpy(c.v, q + m, m * sizeof *c.v);
-            }
-            ipc_recv_release(c.ch);
-        }
-        lap(&t_lap, &prof.wait);
-        /* stage "surf_bcast": what rank 0 received, to every rank (the
-         * surface whatever the frame: a finishing one leaves it unread) */
-        if (dist && (rc = dist->bcast(c.msg, msg_bytes, dist->user, err)))
-            goto done;
-        if (dist)
-            prof.bcast_bytes += (double)msg_bytes;
-        lap(&t_lap, &prof.bcast);
-        /* what the time balance leaves out (dem_mpi.c) */
-        dem_world_add_idle(w, prof.wait + prof.bcast - idle0, dist ? cm_thread_cpu_now() - cpu0 : 0.0);
+            lap(&t_lap, &prof.wait);
+            /* stage "surf_bcast": what rank 0 received, to every rank (the
+             * surface whatever the frame: a finishing one leaves it unread) */
+            if (dist && (rc = dist->bcast(c.msg, msg_bytes, dist->user, err)))
+                goto done;
+            if (dist)
+                prof.bcast_bytes += (double)msg_bytes;
+            lap(&t_lap, &prof.bcast);
+            /* what the time balance leaves out (dem_mpi.c) */
+            dem_world_add_idle(w, prof.wait + prof.bcast - idle0, dist ? cm_thread_cpu_now() - cpu0 : 0.0);
+        } else
+            prof.halo_rides++;
         const uint32_t kind = (uint32_t)in->kind, flags = (uint32_t)in->flags;
         stop_requested = in->stop_requested != 0.0;
         if (kind == IPC_FRAME_FINISH)

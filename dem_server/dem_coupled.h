@@ -18,11 +18,13 @@ typedef struct dem_coupled_profile {
     double surface;  /* s, k x (surface moved, dem_step_surface, node forces summed), and the k - 1 grain steps between */
     double send;     /* s, the interval's mean forces packed and posted */
     double grains;   /* s, dem_step_grains of the last step: overlaps the FEM's step */
-    double wait;     /* s, waiting for the FEM's reply (ipc_recv) */
-    double bcast;    /* s, distributed: the reply broadcast from rank 0 to the other ranks (stage surf_bcast) */
+    double wait;     /* s, waiting for the FEM's reply (ipc_recv; on two ranks inside stage grains, moved here) */
+    double bcast;    /* s, distributed on three ranks or more: the reply broadcast from rank 0 to the other ranks
+                        (stage surf_bcast; on two ranks it rides the step's halo, dem_halo_rider) */
     double update;   /* s, the received surface installed (BVH refit), terrain window moved */
     double record;   /* s, output, checkpoints, health check, progress line */
     double bcast_bytes; /* distributed: bytes broadcast by rank 0 in stage surf_bcast, summed */
+    long halo_rides; /* two ranks: exchanges whose reply rode the halo */
     long exchanges;  /* exchanges completed */
 } dem_coupled_profile;
 

@@ -711,9 +711,10 @@ static int run(const options *o)
                         ms.migrated, s.profile.halo, s.profile.migrate);
             if (!o->standalone)
                 cm_log_info("rank %d of %d: %ld surface contacts over %ld passes (%ld gathers ended among the "
-                            "grain pairs); surf_gather %.2f s, surf_bcast %.2f s; %ld window shifts collected",
+                            "grain pairs); surf_gather %.2f s, surf_bcast %.2f s, %ld replies in the halo; %ld "
+                            "window shifts collected",
                             g_rank, g_ranks, ms.surf_contacts, ms.surf_gathers, ms.surf_early,
-                            s.profile.surf_gather, cprof.bcast, ms.collects);
+                            s.profile.surf_gather, cprof.bcast, cprof.halo_rides, ms.collects);
             if (!o->standalone && g_rank == 0 && ms.surf_gathers > 0 && cprof.exchanges > 0)
                 cm_log_info("MPI traffic of the surface: %.0f bytes broadcast per exchange, %.0f bytes of contacts "
                             "gathered on rank 0 per DEM step (mean)", cprof.bcast_bytes / (double)cprof.exchanges,

@@ -6,9 +6,10 @@
  *            (alltoallv) -> ghosts from the two neighbouring slabs -> the
  *            neighbour list on the global grid (dem_neighbour_rebuild)
  *   halo     after integrate: ghosts' positions and velocities from their
- *            owners (two sendrecv)
- *   agree    the largest displacement and the non-finite flag over all
- *            ranks (allreduce), so that every rank rebuilds at the same step
+ *            owners, the largest displacement and the non-finite flag over
+ *            all ranks, so that every rank rebuilds at the same step (two
+ *            ranks: one exchange, which may carry a rider from rank 0;
+ *            more: two sendrecv and an allreduce)
  *   surf_gather (begin, end) after a surface pass: the ranks' contacts
  *            summed on rank 0 (isend, improbe and imrecv)
  * Layout of a rank's slots after a rebuild: [left ghosts | owned | right
@@ -508,9 +509,73 @@ static void unpack_state(dem_grains *g, int lo, int n, const double *b)
         memcpy(a[k] + lo, b + (size_t)k * n, (size_t)n * sizeof *b);
 }
 
-static int dist_halo(dem_world *w, cm_error *err)
+/* Stage "halo", after integrate: the ghosts' states from their owners and
+ * the rebuild's agreement (the largest displacement and the non-finite flag
+ * over every rank). On two ranks one exchange does it all: each rank posts
+ * its boundary grains' states with its two values behind them to the other
+ * and receives the other's, and rank 0 adds w->rider's bytes (fem_server's
+ * reply in the coupled loop, which then needs no broadcast of its own): one
+ * meeting of the ranks per step where there were four (two sendrecvs, the
+ * allreduce, the broadcast), each of which the rank that came first waited
+ * out. On more ranks: to rank - 1 and from rank + 1, then the other way,
+ * then the allreduce. The same values either way (the maximum and the flag
+ * are exact). */
+enum { TAG_HALO = 3, TAG_HALO_UP = 4, TAG_RIDER = 7 }; /* the others: 1, 2 (rebuild), 5 (TAG_SURF), 6 (TAG_SERIES) */
+
+static int halo_two(dem_world *w, double *maxd2, int *bad, cm_error *err)
 {
     dist_ctx *d = w->dist_ctx;
+    dem_grains *g = &w->g;
+    dem_halo_rider *rd = w->rider;
+    const int peer = 1 - d->rank;
+    /* rank 0 sends its last owned grains and has ghosts after them; rank 1
+     * sends its first owned grains and has ghosts before them */
+    const int n_send = d->rank == 0 ? d->n_send_hi : d->n_send_lo;
+    const int send_lo = d->rank == 0 ? w->own_hi - d->n_send_hi : w->own_lo;
+    const int n_recv = d->rank == 0 ? g->n - w->own_hi : w->own_lo;
+    const int recv_lo = d->rank == 0 ? w->own_hi : 0;
+    const size_t ns = (size_t)HALO_REC * n_send + 2, nr = (size_t)HALO_REC * n_recv + 2;
+    if (grow(&d->sbuf, &d->sbuf_cap, ns) || grow(&d->rbuf, &d->rbuf_cap, nr))
+        return cm_fail(err, CM_ERR_NOMEM, "step %ld: out of memory for the halo", w->step);
+    MPI_Request req[3];
+    int nq = 0, rc;
+    if ((rc = MPI_Irecv(d->rbuf, (int)nr, MPI_DOUBLE, peer, TAG_HALO, d->comm, &req[nq++])) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "receive of the ghost states", w->step);
+    if (rd && d->rank == 1 &&
+        (rc = MPI_Irecv(rd->buf, (int)rd->bytes, MPI_BYTE, 0, TAG_RIDER, d->comm, &req[nq++])) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "receive of the halo's rider", w->step);
+    if (rd && d->rank == 0 && rd->fill) {
+        const double t0 = cm_now();
+        rc = rd->fill(rd->user, err);
+        rd->fill_s += cm_now() - t0;
+        if (rc) /* the caller stops every rank (MPI_Abort) */
+            return rc;
+    }
+    pack_state(g, send_lo, n_send, d->sbuf);
+    d->sbuf[ns - 2] = *maxd2, d->sbuf[ns - 1] = *bad ? 1.0 : 0.0;
+    if ((rc = MPI_Isend(d->sbuf, (int)ns, MPI_DOUBLE, peer, TAG_HALO, d->comm, &req[nq++])) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "send of the ghost states", w->step);
+    if (rd && d->rank == 0 &&
+        (rc = MPI_Isend(rd->buf, (int)rd->bytes, MPI_BYTE, 1, TAG_RIDER, d->comm, &req[nq++])) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "send of the halo's rider", w->step);
+    if ((rc = MPI_Waitall(nq, req, MPI_STATUSES_IGNORE)) != MPI_SUCCESS)
+        return mpi_fail(err, rc, "halo exchange", w->step);
+    unpack_state(g, recv_lo, n_recv, d->rbuf);
+    *maxd2 = fmax(*maxd2, d->rbuf[nr - 2]);
+    *bad = *bad || d->rbuf[nr - 1] != 0.0;
+    if (rd)
+        rd->carried = 1;
+    return CM_OK;
+}
+
+static int dist_halo(dem_world *w, double *maxd2, int *bad, cm_error *err)
+{
+    dist_ctx *d = w->dist_ctx;
+    if (d->size == 2)
+        return halo_two(w, maxd2, bad, err);
+    if (w->rider)
+        return cm_fail(err, CM_ERR_STATE, "step %ld: a message riding the halo needs two ranks, not %d", w->step,
+                       d->size);
     dem_grains *g = &w->g;
     const int lo_rank = d->rank > 0 ? d->rank - 1 : MPI_PROC_NULL;
     const int hi_rank = d->rank + 1 < d->size ? d->rank + 1 : MPI_PROC_NULL;
@@ -520,29 +585,24 @@ static int dist_halo(dem_world *w, cm_error *err)
     int rc;
     /* to rank - 1 the first owned grains, from rank + 1 the last ghosts */
     pack_state(g, w->own_lo, d->n_send_lo, sb);
-    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_lo, MPI_DOUBLE, lo_rank, 3, rb, HALO_REC * n_hi, MPI_DOUBLE,
-                           hi_rank, 3, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_lo, MPI_DOUBLE, lo_rank, TAG_HALO, rb, HALO_REC * n_hi,
+                           MPI_DOUBLE, hi_rank, TAG_HALO, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "sendrecv of the ghost states", w->step);
     unpack_state(g, w->own_hi, n_hi, rb);
     pack_state(g, w->own_hi - d->n_send_hi, d->n_send_hi, sb);
-    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_hi, MPI_DOUBLE, hi_rank, 4, rb, HALO_REC * n_lo, MPI_DOUBLE,
-                           lo_rank, 4, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
+    if ((rc = MPI_Sendrecv(sb, HALO_REC * d->n_send_hi, MPI_DOUBLE, hi_rank, TAG_HALO_UP, rb, HALO_REC * n_lo,
+                           MPI_DOUBLE, lo_rank, TAG_HALO_UP, d->comm, MPI_STATUS_IGNORE)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "sendrecv of the ghost states", w->step);
     unpack_state(g, 0, n_lo, rb);
-    return CM_OK;
-}
-
-static int dist_agree(dem_world *w, double *maxd2, int *bad, cm_error *err)
-{
-    dist_ctx *d = w->dist_ctx;
     double v[2] = {*maxd2, *bad ? 1.0 : 0.0};
-    int rc = MPI_Allreduce(MPI_IN_PLACE, v, 2, MPI_DOUBLE, MPI_MAX, d->comm);
-    if (rc != MPI_SUCCESS)
+    if ((rc = MPI_Allreduce(MPI_IN_PLACE, v, 2, MPI_DOUBLE, MPI_MAX, d->comm)) != MPI_SUCCESS)
         return mpi_fail(err, rc, "allreduce of the displacement", w->step);
     *maxd2 = v[0];
     *bad = v[1] != 0.0;
     return CM_OK;
 }
+
+static int dist_ranks(const dem_world *w) { return ((const dist_ctx *)w->dist_ctx)->size; }
 
 /* Stage "surf_gather", after every surface pass: the ranks' contacts
  * (dem_surface_pack: in slot order, owned grains only) to rank 0, summed
@@ -664,7 +724,7 @@ static void dist_release(dem_world *w)
     w->n_ghost_rows = 0;
 }
 
-static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo,  dist_agree,
+static const dem_dist_ops dist_ops = {dist_rebuild, dist_halo, dist_ranks,
                                       dist_release, dist_surf_gather_begin, dist_surf_gather_end};
 
 static void ctx_free(dist_ctx *d)

@@ -910,6 +910,16 @@ void dem_world_add_idle(dem_world *w, double seconds, double cpu_seconds)
 
 long dem_world_steps(const dem_world *w) { return w->step; }
 
+int dem_world_set_halo_rider(dem_world *w, dem_halo_rider *r, cm_error *err)
+{
+    if (r && (!w->dist || w->dist->ranks(w) != 2))
+        return cm_fail(err, CM_ERR_STATE, "a message riding the halo needs a world distributed on two ranks");
+    if (r)
+        r->fill_s = 0.0, r->carried = 0;
+    w->rider = r;
+    return CM_OK;
+}
+
 /* Grains [lo, hi): their kinetic energies added to s's sums in slot order
  * (a sum along the grain order, which dem_mpi_series_stats continues from
  * rank to rank), the gravity potential and wall energies with `energies`,

@@ -165,10 +165,12 @@ typedef struct dem_dist_ops {
     /* migration of owned grains (with their springs) to the ranks of their
      * new slabs, fresh ghosts, then dem_neighbour_rebuild on the global grid */
     int (*rebuild)(dem_world *w, cm_error *err);
-    /* the ghosts' positions and velocities from their owners, after integrate */
-    int (*halo)(dem_world *w, cm_error *err);
-    /* *maxd2 and *bad (non-zero: a non-finite grain somewhere) over every rank */
-    int (*agree)(dem_world *w, double *maxd2, int *bad, cm_error *err);
+    /* after integrate: the ghosts' positions and velocities from their
+     * owners, and *maxd2 and *bad (non-zero: a non-finite grain somewhere)
+     * over every rank; with w->rider, its bytes from rank 0 to rank 1 */
+    int (*halo)(dem_world *w, double *maxd2, int *bad, cm_error *err);
+    /* the ranks (dem_world_set_halo_rider: two) */
+    int (*ranks)(const dem_world *w);
     /* frees the distribution's own data (dem_world_destroy calls it) */
     void (*release)(dem_world *w);
     /* after every surface pass (dem_surface_contacts): the ranks' contacts
@@ -245,6 +247,7 @@ struct dem_world {
      * step. Without ops own_lo = 0 and own_hi = n at every rebuild. */
     const dem_dist_ops *dist;
     void *dist_ctx;
+    dem_halo_rider *rider; /* NULL, or what the next halo carries (dem_world_set_halo_rider) */
     dem_grid_dims dist_grid; /* the global grid, set by dist->rebuild */
     int own_lo, own_hi;
     /* springs that arrived with migrated grains, searched after the previous

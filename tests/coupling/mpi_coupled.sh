@@ -65,6 +65,18 @@ for c in "${cases[@]}"; do
   # left a sliver away from the tire), so there only the results count
   [ "$name" = scene2 ] || [ "$touching" -gt 1 ] ||
     { echo "$name: surface contacts on $touching rank(s), want more than one"; exit 1; }
+  # on two ranks fem_server's reply rides the halo exchange at every
+  # exchange but the last (the finishing frame is broadcast); on three it
+  # is broadcast (dem_halo_rider)
+  rides=$(sed -n 's/.*rank [0-9]* of [0-9]*:.* \([0-9]*\) replies in the halo;.*/\1/p' "$work/$name.log" |
+          awk 'NR == 1 {lo = hi = $1} {lo = $1 < lo ? $1 : lo; hi = $1 > hi ? $1 : hi} END {print NR, lo + 0, hi + 0}')
+  read -r nr lo hi <<< "$rides"
+  [ "$nr" -eq "$n" ] || { echo "$name: $nr ranks logged their replies in the halo, want $n"; exit 1; }
+  if [ "$n" -eq 2 ]; then
+    [ "$lo" -gt 0 ] && [ "$lo" -eq "$hi" ] || { echo "$name: replies in the halo $lo to $hi over the ranks"; exit 1; }
+  else
+    [ "$hi" -eq 0 ] || { echo "$name: $hi replies in the halo on $n ranks"; exit 1; }
+  fi
   shifts=$(sed -n 's/.*rank 0 of [0-9]*:.*; \([0-9]*\) window shifts collected.*/\1/p' "$work/$name.log")
   grep -q 'window: [1-9][0-9]* removals .*, [1-9][0-9]* stretches appended' "$work/$name.log" &&
     [ "${shifts:-0}" -gt 0 ] || { echo "$name: the window did not shift while distributed"; exit 1; }

@@ -417,6 +417,13 @@ static inline int node_apart(const dem_bvh_node *nd, const double lo[3], const d
            nd->hi[2] < lo[2];
 }
 
+/* node_apart for the box around the sphere (c, r). */
+static inline int sphere_apart(const dem_bvh_node *nd, vec3 c, double r)
+{
+    const double lo[3] = {c.x - r, c.y - r, c.z - r}, hi[3] = {c.x + r, c.y + r, c.z + r};
+    return node_apart(nd, lo, hi);
+}
+
 /* Walks the BVH for the triangles whose closest point to p lies within r,
  * in a fixed order (depth first, left child first, leaf order), for both the
  * sphere and the shaped contact paths. A traversal stack deeper than 64
@@ -886,8 +893,7 @@ static int surf_lists_build(const dem_surface *s, dem_grains *g, int lo, int hi,
         double r = g->r[i] + margin;
         vec3 c = v3(g->x[i], g->y[i], g->z[i]);
         int start = sc->n_lt;
-        if (near && !(root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r ||
-                      root->hi[1] < c.y - r || root->lo[2] > c.z + r || root->hi[2] < c.z - r)) {
+        if (near && !sphere_apart(root, c, r)) {
             int overflow = 0, t, reg;
             double bary[3], cp[3], d2;
             near_iter it;
@@ -1100,8 +1106,7 @@ int dem_surface_contacts(dem_world *w, cm_error *err)
              * grains, far from the tire, never read their 224 bytes of history. */
             const int had_contacts = g->surf_count[i];
             g->surf_count[i] = 0;
-            if (root->lo[0] > c.x + r || root->hi[0] < c.x - r || root->lo[1] > c.y + r ||
-                root->hi[1] < c.y - r || root->lo[2] > c.z + r || root->hi[2] < c.z - r) {
+            if (sphere_apart(root, c, r)) {
                 if (had_contacts)
                     memset(hs, 0, DEM_SURF_SLOTS * DEM_SURF_SLOT_SIZE * sizeof *hs);
                 continue;
